@@ -1,0 +1,70 @@
+"""The tolerances and switches of a morph, in one explicit, documented record.
+
+A :class:`Settings` is passed down through every step; no step reads module-level state, and nothing here
+touches OpenCascade's global settings.  Lengths are in millimetres.  Where a length is ``None`` it is taken
+relative to the part: the ``*_rel`` factor times the diagonal of the part's bounding box.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Single-precision machine epsilon, the paper's FLT_EPSILON in the SVD cut-off of eq. (20).
+FLT_EPSILON = float(np.finfo(np.float32).eps)
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Tolerances of the hot-to-cold morph.
+
+    Attributes
+    ----------
+    node_distance : float or None
+        A node whose distance to every face exceeds this (mm) takes no part (volume nodes, other parts).
+        ``None``: ``node_distance_rel`` x part diagonal.
+    node_distance_rel : float
+        Relative default of ``node_distance``.
+    edge_distance : float or None
+        A node within this distance (mm) of an edge curve feeds that edge (METHOD step 3) rather than the
+        face interior.  ``None``: ``edge_distance_rel`` x part diagonal.
+    edge_distance_rel : float
+        Relative default of ``edge_distance``.
+    svd_epsilon : float
+        The machine-precision factor of the truncated SVD cut-off: singular values below
+        ``sigma_1 * (s - 1) * svd_epsilon`` are dropped (eq. 20; the paper uses FLT_EPSILON).
+    vertex_neighbours : int
+        How many nearest foot points estimate a vertex displacement by a local least-squares fit when no
+        node sits on the vertex.
+    edge_samples_per_span : int
+        Points per knot span at which a morphed edge that is not an iso-curve of a face constrains that
+        face's fit (keeps trimmed faces on their edges).
+    """
+
+    node_distance: float | None = None
+    node_distance_rel: float = 2e-3
+    edge_distance: float | None = None
+    edge_distance_rel: float = 1e-4
+    svd_epsilon: float = FLT_EPSILON
+    vertex_neighbours: int = 20
+    edge_samples_per_span: int = 4
+
+    def __post_init__(self):
+        for name in ("node_distance", "edge_distance"):
+            value = getattr(self, name)
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive length in mm, got {value!r}")
+        for name in ("node_distance_rel", "edge_distance_rel", "svd_epsilon"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive, got {value!r}")
+        if self.vertex_neighbours < 4:
+            raise ValueError(f"vertex_neighbours must be at least 4, got {self.vertex_neighbours}")
+        if self.edge_samples_per_span < 1:
+            raise ValueError(f"edge_samples_per_span must be at least 1, got {self.edge_samples_per_span}")
+
+    def lengths(self, diagonal: float) -> tuple[float, float]:
+        """``(node_distance, edge_distance)`` in mm for a part whose bounding box diagonal is ``diagonal``."""
+        node = self.node_distance if self.node_distance is not None else self.node_distance_rel * diagonal
+        edge = self.edge_distance if self.edge_distance is not None else self.edge_distance_rel * diagonal
+        return node, edge
