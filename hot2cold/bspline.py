@@ -16,8 +16,11 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from math import comb as _comb
 
 import numpy as np
+import scipy.sparse as _sparse
+from scipy.interpolate import BSpline as _SciBSpline
 
 
 def _as_float_array(a, name: str, ndim: int) -> np.ndarray:
@@ -133,3 +136,285 @@ class BSplineSurface:
     def with_poles(self, poles: np.ndarray) -> "BSplineSurface":
         """The same surface (degrees, knots, weights) with another control net ``(nu, nv, 3)``."""
         return replace(self, poles=poles)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Evaluation: basis matrices and points.
+#
+# Every basis matrix here is built from ``scipy.interpolate.BSpline.design_matrix`` and kept internally in a
+# fixed-width row form: row ``r`` has ``degree + 1`` consecutive non-zero columns starting at ``start[r]``
+# (the knot span of the parameter), with values ``vals[r, :]``.  That makes rational weighting, derivatives
+# and the row-wise Kronecker product of a surface plain vectorised numpy on (m, degree + 1) arrays; the
+# result is handed out as a ``scipy.sparse.csr_array`` with sorted column indices.  Entries that happen to
+# be zero (e.g. at a knot) are kept as explicit zeros, so every row of a curve basis stores exactly
+# ``degree + 1`` entries and every row of a surface basis ``(u_degree + 1) * (v_degree + 1)``.
+# ----------------------------------------------------------------------------------------------------------
+
+#: Parameters outside the domain by at most this fraction of the domain length (or of the largest end
+#: value, whichever is larger) are clipped onto the domain; farther ones raise ``ValueError``.
+PARAM_RTOL = 1e-10
+
+
+def _parameters(t, lo: float, hi: float, name: str) -> np.ndarray:
+    """``t`` as a float array ``(m,)`` clipped to ``[lo, hi]``; ValueError if farther outside than tolerated."""
+    arr = np.asarray(t, dtype=float)
+    if arr.ndim == 0:
+        arr = arr.reshape(1)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be a scalar or a 1-D array (m,), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} holds NaN or inf")
+    tol = PARAM_RTOL * max(hi - lo, abs(lo), abs(hi))
+    if arr.size:
+        bad = (arr < lo - tol) | (arr > hi + tol)
+        if np.any(bad):
+            worst = arr[bad][np.argmax(np.maximum(lo - arr[bad], arr[bad] - hi))]
+            raise ValueError(
+                f"{np.count_nonzero(bad)} value(s) of {name} lie outside the domain [{lo!r}, {hi!r}] "
+                f"(e.g. {worst!r}; tolerance {tol:.3g})")
+    return np.clip(arr, lo, hi)
+
+
+def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Basis values and the derivatives ``1..nu`` in fixed-width row form.
+
+    ``x`` (m,) must lie in the domain.  Returns ``start`` (m,) int, the column of the first non-zero basis
+    function of each row, and ``[vals_0, ..., vals_nu]``, each (m, degree + 1): ``vals_k[r, a]`` is the
+    ``k``-th derivative of basis function ``start[r] + a`` at ``x[r]``.
+
+    Derivatives use the knot-difference identity: the ``k``-th derivative of a degree-``p`` spline on knots
+    ``t`` is a degree-``(p - k)`` spline on ``t[k:-k]``, whose coefficients are repeated scaled differences
+    ``d (c_{j+1} - c_j) / (T[j+d+1] - T[j+1])`` of the original ones.  So the degree-``(p - k)`` design matrix
+    (again from ``design_matrix``) is multiplied by ``k`` bidiagonal difference matrices, done here row-wise.
+    """
+    p = degree
+    m = x.shape[0]
+    n = len(knots) - p - 1
+    if m == 0:
+        return np.zeros(0, dtype=np.int64), [np.zeros((0, p + 1)) for _ in range(nu + 1)]
+    out = []
+    start = None
+    for k in range(nu + 1):
+        if k > p:
+            out.append(np.zeros((m, p + 1)))
+            continue
+        d0 = p - k
+        tk = knots[k:len(knots) - k] if k else knots
+        dm = _SciBSpline.design_matrix(x, tk, d0)
+        vals = np.asarray(dm.data, dtype=float).reshape(m, d0 + 1)
+        s = np.asarray(dm.indices[::d0 + 1], dtype=np.int64)
+        if start is None:
+            start = s
+        elif not np.array_equal(s, start):  # cannot happen for a valid clamped knot vector
+            raise RuntimeError("inconsistent knot spans between basis degrees")
+        # Raise the degree-d0 row back to the degree-p index space: multiply by Diff_d, d = d0+1 .. p.
+        for d in range(d0 + 1, p + 1):
+            td = knots[p - d:len(knots) - (p - d)]
+            nd = n - p + d  # number of basis functions of degree d on td
+            den = td[d + 1:nd + d] - td[1:nd]  # (nd - 1,): T[j+d+1] - T[j+1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                coef = np.where(den > 0, d / np.where(den > 0, den, 1.0), 0.0)
+            w = vals.shape[1]
+            pv = vals * coef[start[:, None] + np.arange(w)]
+            new = np.zeros((m, w + 1))
+            new[:, :w] -= pv
+            new[:, 1:] += pv
+            vals = new
+        out.append(vals)
+    return start, out
+
+
+def _rationalise(vals: list[np.ndarray], wcols: np.ndarray) -> list[np.ndarray]:
+    """Rational basis derivatives from non-rational ones.
+
+    ``vals[k]`` (m, w) are k-th derivatives of ``N_i``; ``wcols`` (m, w) the weights of those columns.  With
+    ``A_k = w_i N_i^(k)`` and ``W_k = sum_i A_k``, the general Leibniz quotient rule gives
+    ``R^(k) = (A_k - sum_{i=1..k} C(k, i) W_i R^(k-i)) / W_0``.
+    """
+    a = [v * wcols for v in vals]
+    wsum = [ak.sum(axis=1, keepdims=True) for ak in a]
+    r = []
+    for k in range(len(vals)):
+        acc = a[k].copy()
+        for i in range(1, k + 1):
+            acc -= _comb(k, i) * wsum[i] * r[k - i]
+        r.append(acc / wsum[0])
+    return r
+
+
+def _to_csr(start: np.ndarray, vals: np.ndarray, n_cols: int) -> _sparse.csr_array:
+    m, w = vals.shape
+    indices = (start[:, None] + np.arange(w)).ravel()
+    indptr = np.arange(0, m * w + 1, w, dtype=np.int64)
+    return _sparse.csr_array((vals.ravel(), indices, indptr), shape=(m, n_cols))
+
+
+def _curve_rows(curve: BSplineCurve, t, nu: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    lo, hi = curve.domain
+    x = _parameters(t, lo, hi, "t")
+    start, vals = _span_rows(x, curve.knots, curve.degree, nu)
+    if curve.weights is not None:
+        vals = _rationalise(vals, curve.weights[start[:, None] + np.arange(curve.degree + 1)])
+    return start, vals
+
+
+def curve_basis(curve: BSplineCurve, t) -> _sparse.csr_array:
+    """Basis function values of ``curve`` at parameters ``t``.
+
+    Parameters
+    ----------
+    curve : BSplineCurve with ``n`` poles.
+    t : (m,) float array (or a scalar, taken as (1,)) of parameters in ``curve.domain``.  Values outside the
+        domain by at most ``PARAM_RTOL`` of its length are clipped onto it; farther ones raise ``ValueError``.
+
+    Returns
+    -------
+    (m, n) ``scipy.sparse.csr_array``; ``B @ curve.poles`` are the curve points ``(m, 3)``.  Each row holds
+    ``degree + 1`` stored entries (explicit zeros included).  For a rational curve the entries are
+    ``R_i = w_i N_i / sum_k w_k N_k``; rows sum to 1 either way.
+
+    ``t == knots[n]`` (the domain end) is evaluated on the last non-empty knot span, i.e. as the left
+    limit, which gives ``B[:, n - 1] == 1`` for a clamped knot vector.
+    """
+    start, (vals,) = _curve_rows(curve, t, 0)
+    return _to_csr(start, vals, curve.n_poles)
+
+
+def curve_derivative_basis(curve: BSplineCurve, t, nu: int = 1) -> _sparse.csr_array:
+    """Basis of the ``nu``-th derivative ``d^nu C / dt^nu`` of ``curve`` at parameters ``t`` (m,).
+
+    Returns a sparse (m, n) ``csr_array`` with the same structure as :func:`curve_basis` (``degree + 1``
+    stored entries per row); ``D @ curve.poles`` is the ``nu``-th derivative ``(m, 3)``.  For a rational
+    curve the quotient (Leibniz) rule is applied to ``R_i = w_i N_i / W``.  ``nu = 0`` is
+    :func:`curve_basis`; ``nu > degree`` gives zeros for a non-rational curve.
+
+    At a knot where the curve is only C^(nu-1) the derivative is the one of the span to the right (at the
+    domain end: of the last span), as ``design_matrix`` picks spans.
+    """
+    if int(nu) != nu or nu < 0:
+        raise ValueError(f"nu must be a non-negative integer, got {nu!r}")
+    start, vals = _curve_rows(curve, t, int(nu))
+    return _to_csr(start, vals[-1], curve.n_poles)
+
+
+def _surface_rows(surface: BSplineSurface, u, v, nu: int):
+    """Fixed-width tensor-product rows up to first derivatives (``nu`` is 0 or 1).
+
+    Returns the column indices ``cols`` (m, (p+1)(q+1)) and a list of value arrays of that shape: the
+    (rational if weighted) basis and, if ``nu == 1``, its u- and v-derivatives.
+    """
+    u0, u1, v0, v1 = surface.domain
+    uu = _parameters(u, u0, u1, "u")
+    vv = _parameters(v, v0, v1, "v")
+    if uu.shape != vv.shape:
+        if uu.size == 1:
+            uu = np.full(vv.shape, uu[0])
+        elif vv.size == 1:
+            vv = np.full(uu.shape, vv[0])
+        else:
+            raise ValueError(f"u and v must have the same shape (m,) (or one be a scalar), got {uu.shape} "
+                             f"and {vv.shape}")
+    p, q = surface.u_degree, surface.v_degree
+    nv = surface.shape[1]
+    su, bu = _span_rows(uu, surface.u_knots, p, nu)
+    sv, bv = _span_rows(vv, surface.v_knots, q, nu)
+    m = uu.shape[0]
+    cols = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv
+            + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
+
+    def kron(a, b):
+        return (a[:, :, None] * b[:, None, :]).reshape(m, (p + 1) * (q + 1))
+
+    vals = [kron(bu[0], bv[0])]
+    if nu:
+        vals += [kron(bu[1], bv[0]), kron(bu[0], bv[1])]
+    if surface.weights is not None:
+        wcols = surface.weights.reshape(-1)[cols]
+        a = [x * wcols for x in vals]
+        wsum = [x.sum(axis=1, keepdims=True) for x in a]
+        r0 = a[0] / wsum[0]
+        vals = [r0] + [(a[k] - wsum[k] * r0) / wsum[0] for k in range(1, len(a))]
+    return cols, vals
+
+
+def _cols_to_csr(cols: np.ndarray, vals: np.ndarray, n_cols: int) -> _sparse.csr_array:
+    m, w = vals.shape
+    indptr = np.arange(0, m * w + 1, w, dtype=np.int64)
+    return _sparse.csr_array((vals.ravel(), cols.ravel(), indptr), shape=(m, n_cols))
+
+
+def surface_basis(surface: BSplineSurface, u, v) -> _sparse.csr_array:
+    """Tensor-product basis of ``surface`` at parameter pairs ``(u[r], v[r])``.
+
+    Parameters
+    ----------
+    surface : BSplineSurface with a ``(nu, nv)`` control net.
+    u, v : (m,) float arrays of parameters (either may be a scalar, repeated for every row), in the domain
+        up to ``PARAM_RTOL`` (clipped; farther raises ``ValueError``).
+
+    Returns
+    -------
+    (m, nu * nv) ``scipy.sparse.csr_array``: the row-wise Kronecker product of the u and v design matrices,
+    column ``i * nv + j`` for pole ``(i, j)``; ``B @ surface.poles.reshape(-1, 3)`` are the points (m, 3).
+    Rational when the surface has weights (``R_ij = w_ij N_i N_j / sum w N N``).  Each row stores
+    ``(u_degree + 1) * (v_degree + 1)`` entries, explicit zeros included.
+    """
+    cols, (vals,) = _surface_rows(surface, u, v, 0)
+    return _cols_to_csr(cols, vals, surface.shape[0] * surface.shape[1])
+
+
+def surface_derivative_bases(surface: BSplineSurface, u, v) -> tuple[_sparse.csr_array, _sparse.csr_array]:
+    """Bases of the first partial derivatives ``(dS/du, dS/dv)``, each an (m, nu * nv) ``csr_array``.
+
+    Same columns and structure as :func:`surface_basis`; rational surfaces use the quotient rule
+    ``R_u = (w N_u - W_u R) / W``.  At a knot where the surface is only C0 the derivative of the span on the
+    larger-parameter side is returned (at the domain end: of the last span).
+    """
+    cols, (_, du, dv) = _surface_rows(surface, u, v, 1)
+    n = surface.shape[0] * surface.shape[1]
+    return _cols_to_csr(cols, du, n), _cols_to_csr(cols, dv, n)
+
+
+def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
+    """Points ``C(t)`` (m, 3) of ``curve`` at parameters ``t`` (m,)."""
+    return curve_basis(curve, t) @ curve.poles
+
+
+def evaluate_surface(surface: BSplineSurface, u, v) -> np.ndarray:
+    """Points ``S(u, v)`` (m, 3) of ``surface`` at parameters ``u``, ``v`` (m,)."""
+    return surface_basis(surface, u, v) @ surface.poles.reshape(-1, 3)
+
+
+def surface_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """First partial derivatives ``(S_u (m, 3), S_v (m, 3))`` at parameters ``u``, ``v`` (m,)."""
+    du, dv = surface_derivative_bases(surface, u, v)
+    flat = surface.poles.reshape(-1, 3)
+    return du @ flat, dv @ flat
+
+
+#: Relative tolerance of :func:`surface_normals`: a first derivative is taken as zero where it is below
+#: ``NORMAL_RTOL * sum_i |dB_i| * max |pole|`` (rounding noise of the sum), and the normal as undefined where
+#: ``|S_u x S_v| <= NORMAL_RTOL * |S_u| * |S_v|`` (parallel tangents).
+NORMAL_RTOL = 1e-12
+
+
+def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
+    """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3) at parameters ``u``, ``v`` (m,).
+
+    Rows where the normal is undefined are NaN: where ``S_u`` or ``S_v`` vanishes (a collapsed boundary,
+    e.g. the pole of a revolved surface) up to rounding, or where the two are parallel (see
+    ``NORMAL_RTOL``).  The caller decides what to do there.
+    """
+    du, dv = surface_derivative_bases(surface, u, v)
+    flat = surface.poles.reshape(-1, 3)
+    su, sv = du @ flat, dv @ flat
+    size = float(np.abs(flat).max()) if flat.size else 0.0
+    nrm = np.cross(su, sv)
+    length = np.linalg.norm(nrm, axis=1)
+    lu, lv = np.linalg.norm(su, axis=1), np.linalg.norm(sv, axis=1)
+    ok = ((lu > NORMAL_RTOL * size * np.asarray(abs(du).sum(axis=1)).ravel())
+          & (lv > NORMAL_RTOL * size * np.asarray(abs(dv).sum(axis=1)).ravel())
+          & (length > NORMAL_RTOL * lu * lv))
+    out = np.full_like(nrm, np.nan)
+    out[ok] = nrm[ok] / length[ok, None]
+    return out
