@@ -42,7 +42,7 @@ class Settings:
     """
 
     node_distance: float | None = None
-    node_distance_rel: float = 2e-3
+    node_distance_rel: float = 1e-3
     edge_distance: float | None = None
     edge_distance_rel: float = 1e-4
     svd_epsilon: float = FLT_EPSILON

@@ -1,0 +1,120 @@
+"""Morphing the edges first (paper section 2, eq. 1-22; METHOD step 3).
+
+Every edge is morphed once, and both of its faces later take it as it is.  The end poles of a clamped edge
+curve are its vertices, and they move with the vertex displacements (eq. 10); the inner poles solve the
+least-squares problem of eq. (11)-(18) by truncated SVD (eq. 19-20):
+
+    sum_{i=1..n-1} N_i(u_k) dp_i = dd_k - N_0(u_k) dp_0 - N_n(u_k) dp_n,   k over the edge's nodes.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .artificial import FieldEstimator
+from .bspline import BSplineCurve, curve_basis, evaluate_curve
+from .classify import EDGE, VERTEX, Classification
+from .field import DisplacementField
+from .lstsq import solve_tsvd
+from .model import Part
+from .settings import Settings
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeMorph:
+    """The morph of one edge.
+
+    Attributes
+    ----------
+    index : int, the edge.
+    curve : BSplineCurve or None, the morphed curve (None for a degenerate edge).
+    nodes : int, FE nodes that fed the edge.
+    artificial : int, artificial nodes added in knot spans without a node.
+    unknowns : int, inner poles solved for (3 coordinates each).
+    rank : int, rank kept by the truncated SVD.
+    condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
+    """
+
+    index: int
+    curve: BSplineCurve | None
+    nodes: int
+    artificial: int
+    unknowns: int
+    rank: int
+    condition: float
+
+
+def vertex_displacements(part: Part, cls: Classification, field: DisplacementField,
+                         estimator: FieldEstimator) -> np.ndarray:
+    """Displacements ``(nv, 3)`` of the vertices: the mean of the nodes on a vertex, else the local
+    linear estimate from the nearest foot points (an artificial node)."""
+    disp = estimator(part.vertices) if len(part.vertices) else np.zeros((0, 3))
+    for v in range(len(part.vertices)):
+        nodes = cls.nodes_of(VERTEX, v)
+        if len(nodes):
+            disp[v] = field.displacements[nodes].mean(axis=0)
+    return disp
+
+
+def _empty_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
+    """Midpoints ``(m,)`` of the knot spans of ``curve`` that hold no parameter of ``t``."""
+    breaks = np.unique(curve.knots[curve.degree:curve.n_poles + 1])
+    counts, _ = np.histogram(t, bins=breaks)
+    return 0.5 * (breaks[:-1] + breaks[1:])[counts == 0]
+
+
+def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
+               estimator: FieldEstimator | None, epsilon: float, index: int = -1) -> EdgeMorph:
+    """Morph one clamped curve.
+
+    Parameters
+    ----------
+    curve : the hot curve, n poles.
+    t : (s,) foot-point parameters of the edge's nodes; disp : (s, 3) their displacements.
+    end_disp : (2, 3) displacements of the start and end vertex (eq. 10).
+    estimator : gives artificial nodes in knot spans without a node (None: none are added).
+    epsilon : machine-precision factor of the SVD cut-off (eq. 20).
+    """
+    n = curve.n_poles
+    delta = np.zeros((n, 3))
+    delta[0], delta[-1] = end_disp
+    artificial = 0
+    if estimator is not None and n > 2:
+        t_art = _empty_spans(curve, t)
+        if len(t_art):
+            artificial = len(t_art)
+            t = np.concatenate([t, t_art])
+            disp = np.concatenate([disp, estimator(evaluate_curve(curve, t_art))])
+    rank, condition = 0, float("nan")
+    if n > 2 and len(t):
+        basis = curve_basis(curve, t).toarray()
+        rhs = disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
+        sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon)         # eq. (13)-(20)
+        delta[1:-1] = sol.x
+        rank, condition = sol.rank, sol.condition
+    elif n > 2:
+        # No data at all: move the inner poles with the chord between the end displacements.
+        w = np.linspace(0.0, 1.0, n)[1:-1, None]
+        delta[1:-1] = (1 - w) * end_disp[0] + w * end_disp[1]
+    return EdgeMorph(index, curve.with_poles(curve.poles + delta), len(t) - artificial, artificial,
+                     max(n - 2, 0), rank, condition)
+
+
+def morph_edges(part: Part, cls: Classification, field: DisplacementField, vertex_disp: np.ndarray,
+                estimator: FieldEstimator, settings: Settings) -> list[EdgeMorph]:
+    """Morph every edge of ``part`` once (degenerate edges are carried as None curves)."""
+    out = []
+    for edge in part.edges:
+        if edge.degenerate:
+            out.append(EdgeMorph(edge.index, None, 0, 0, 0, 0, float("nan")))
+            continue
+        nodes = cls.nodes_of(EDGE, edge.index)
+        out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
+                              vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon,
+                              edge.index))
+    log.info("morphed %d edges", len(out))
+    return out

@@ -1,0 +1,203 @@
+"""Morphing the face interiors (paper section 3, eq. 23-38; METHOD step 4).
+
+A face's boundary rows of poles come from its morphed edges wherever an edge runs along a whole side of
+the surface's domain with the same degree, knots and weights as that row (for an untrimmed face the four
+sides u=0, u=1, v=0, v=1 are its edges, eq. 32-36): those rows are set to the edge's morphed poles
+exactly, so the two faces of an edge meet without a gap.  The remaining poles solve eq. (38),
+
+    sum_{i,j free} N_i(u_k) N_j(v_k) dp_ij = dd_k - sum_{i,j fixed} N_i(u_k) N_j(v_k) dp_ij,
+
+over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20).
+Edges that are not a whole side (trimmed faces, split sides) add rows that hold the surface to the morphed
+edge at points along the edge's curve on the face, and knot-span patches without any data get an
+artificial node at their centre (eq. 39) so that no pole is left undetermined.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .artificial import FieldEstimator
+from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
+from .classify import FACE, Classification
+from .edges import EdgeMorph
+from .field import DisplacementField
+from .lstsq import solve_tsvd
+from .model import EdgeUse, Face, Part
+from .settings import Settings
+
+log = logging.getLogger(__name__)
+
+#: Sides of a surface's parameter domain: (parameter axis, end).
+SIDES = {"u0": (0, 0), "u1": (0, 1), "v0": (1, 0), "v1": (1, 1)}
+
+
+@dataclass(frozen=True, eq=False)
+class FaceMorph:
+    """The morph of one face.
+
+    Attributes
+    ----------
+    index : int, the face.
+    surface : BSplineSurface, the morphed surface (same degrees, knots and weights).
+    nodes : int, FE nodes in the face interior.
+    edge_rows : int, rows that hold the surface to edges that are not whole sides.
+    artificial : int, artificial nodes added in empty knot-span patches.
+    tied_sides : tuple of str, sides whose poles were set from a morphed edge ("u0", "u1", "v0", "v1").
+    unknowns : int, poles solved for.
+    rank : int, rank kept by the truncated SVD.
+    condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
+    """
+
+    index: int
+    surface: BSplineSurface
+    nodes: int
+    edge_rows: int
+    artificial: int
+    tied_sides: tuple[str, ...]
+    unknowns: int
+    rank: int
+    condition: float
+
+
+def _row(array: np.ndarray, side: str) -> tuple:
+    """Index expression of a side's row of poles in an ``(nu, nv, ...)`` array."""
+    axis, end = SIDES[side]
+    i = 0 if end == 0 else -1
+    return (i, slice(None)) if axis == 0 else (slice(None), i)
+
+
+def _normalised(knots: np.ndarray) -> np.ndarray:
+    return (knots - knots[0]) / (knots[-1] - knots[0])
+
+
+def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tuple[str, bool] | None:
+    """The side a whole edge use runs along, and whether it runs against the side's direction."""
+    u0, u1, v0, v1 = surface.domain
+    span = np.array([u1 - u0, v1 - v0])
+    for side, (axis, end) in SIDES.items():
+        fixed_value = (u0, u1, v0, v1)[2 * axis + end]
+        along = 1 - axis
+        lo, hi = (u0, v0)[along], (u1, v1)[along]
+        if np.all(np.abs(use.uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
+            a, b = use.uv[0, along], use.uv[-1, along]
+            if min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]:
+                return side, bool(a > b)
+    return None
+
+
+def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray,
+         tol: float) -> tuple[str, np.ndarray] | None:
+    """If ``use`` is a whole side compatible with the surface's row there, the side and its morphed
+    poles ``(row length, 3)``; else None."""
+    found = _side_of(face.surface, use)
+    if found is None:
+        return None
+    side, backwards = found
+    surface = face.surface
+    row = surface.poles[_row(surface.poles, side)]
+    edge = part.edges[use.edge]
+    if edge.degenerate:
+        if np.ptp(row, axis=0).max() > tol:
+            return None
+        return side, row + vertex_disp[edge.vertices[0]]
+    curve = edge.curve
+    knots = surface.v_knots if SIDES[side][0] == 0 else surface.u_knots
+    degree = surface.v_degree if SIDES[side][0] == 0 else surface.u_degree
+    poles, morphed = curve.poles, edge_morphs[use.edge].curve.poles
+    curve_knots = _normalised(curve.knots)
+    weights = curve.weights
+    if backwards:
+        poles, morphed = poles[::-1], morphed[::-1]
+        curve_knots = 1.0 - curve_knots[::-1]
+        weights = None if weights is None else weights[::-1]
+    if (curve.degree != degree or len(poles) != len(row)
+            or not np.allclose(curve_knots, _normalised(knots), rtol=0, atol=1e-9)
+            or np.abs(poles - row).max() > tol):
+        return None
+    row_w = np.ones(len(row)) if surface.weights is None else surface.weights[_row(surface.weights, side)]
+    ratio = row_w / (np.ones(len(row)) if weights is None else weights)
+    if not np.allclose(ratio, ratio[0], rtol=1e-9, atol=0):
+        return None
+    return side, morphed
+
+
+def _empty_patches(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
+    """Centres ``(m, 2)`` of the knot-span patches (eq. 39) that hold no parameter pair of ``uv``."""
+    nu, nv = surface.shape
+    ub = np.unique(surface.u_knots[surface.u_degree:nu + 1])
+    vb = np.unique(surface.v_knots[surface.v_degree:nv + 1])
+    counts, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], bins=[ub, vb]) if len(uv) else (
+        np.zeros((len(ub) - 1, len(vb) - 1)), None, None)
+    uc, vc = 0.5 * (ub[:-1] + ub[1:]), 0.5 * (vb[:-1] + vb[1:])
+    i, j = np.nonzero(counts == 0)
+    return np.column_stack([uc[i], vc[j]])
+
+
+def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
+               edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
+               settings: Settings) -> FaceMorph:
+    """Morph one face with its boundary taken from the morphed edges."""
+    surface = face.surface
+    nu, nv = surface.shape
+    tol = 1e-7 * part.diagonal
+    delta = np.zeros((nu, nv, 3))
+    fixed = np.zeros((nu, nv), bool)
+    tied = []
+    uv_rows, target_rows = [], []
+    for use in face.uses:
+        tie = _tie(face, use, part, edge_morphs, vertex_disp, tol)
+        if tie is not None:
+            side, morphed_row = tie
+            index = _row(delta, side)
+            delta[index] = morphed_row - surface.poles[index]
+            fixed[index] = True
+            tied.append(side)
+            continue
+        hot = evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1])
+        curve = edge_morphs[use.edge].curve
+        if curve is None:
+            cold = hot + vertex_disp[part.edges[use.edge].vertices[0]]
+        else:
+            cold = evaluate_curve(curve, use.t)
+        uv_rows.append(use.uv)
+        target_rows.append(cold - hot)
+    edge_rows = sum(len(r) for r in uv_rows)
+
+    nodes = cls.nodes_of(FACE, face.index)
+    uv_rows.append(cls.uv[nodes])
+    target_rows.append(field.displacements[nodes])
+    uv = np.concatenate(uv_rows)
+    target = np.concatenate(target_rows)
+
+    centres = _empty_patches(surface, uv)
+    if len(centres):
+        uv = np.concatenate([uv, centres])
+        target = np.concatenate([target, estimator(evaluate_surface(surface, centres[:, 0], centres[:, 1]))])
+
+    free = ~fixed.ravel()
+    rank, condition = 0, float("nan")
+    if free.any():
+        basis = surface_basis(surface, uv[:, 0], uv[:, 1])
+        flat = delta.reshape(-1, 3)
+        rhs = target - basis[:, ~free] @ flat[~free] if (~free).any() else target   # eq. (38)
+        sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon)                  # eq. (19)-(20)
+        flat[free] = sol.x
+        rank, condition = sol.rank, sol.condition
+    return FaceMorph(face.index, surface.with_poles(surface.poles + delta), len(nodes), edge_rows,
+                     len(centres), tuple(sorted(set(tied))), int(free.sum()), rank, condition)
+
+
+def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_morphs: list[EdgeMorph],
+                vertex_disp: np.ndarray, estimator: FieldEstimator, settings: Settings,
+                progress=None) -> list[FaceMorph]:
+    """Morph every face of ``part``; ``progress(done, total)`` is called after each face if given."""
+    out = []
+    for face in part.faces:
+        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings))
+        if progress is not None:
+            progress(len(out), len(part.faces))
+    log.info("morphed %d faces", len(out))
+    return out

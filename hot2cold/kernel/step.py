@@ -1,0 +1,67 @@
+"""Reading and writing STEP files.
+
+Output is written whole or not at all: to a temporary file in the target folder, then renamed.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+
+from OCP.IFSelect import IFSelect_RetDone
+from OCP.STEPControl import STEPControl_AsIs, STEPControl_Reader, STEPControl_Writer
+from OCP.TopAbs import TopAbs_SOLID
+from OCP.TopExp import TopExp_Explorer
+from OCP.TopoDS import TopoDS_Shape
+
+from ..errors import KernelError, StepReadError
+
+log = logging.getLogger(__name__)
+
+
+def read_step(path: str | os.PathLike) -> TopoDS_Shape:
+    """Read a STEP file into one shape (a compound when the file holds several roots).
+
+    Raises :class:`StepReadError` when the file is missing, unreadable or holds no solid.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise StepReadError(f"STEP file not found: {path}")
+    if path.stat().st_size == 0:
+        raise StepReadError(f"STEP file is empty: {path}")
+    reader = STEPControl_Reader()
+    try:
+        status = reader.ReadFile(str(path))
+    except Exception as exc:  # the kernel raises Standard_Failure on some corrupt files
+        raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
+    if status != IFSelect_RetDone:
+        raise StepReadError(f"cannot read STEP file {path}: not a valid STEP file (reader status {status.name})")
+    if reader.TransferRoots() == 0:
+        raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
+    shape = reader.OneShape()
+    if shape.IsNull() or not TopExp_Explorer(shape, TopAbs_SOLID).More():
+        raise StepReadError(f"STEP file {path} holds no solid: hot2cold morphs solids (export the part as a solid)")
+    log.info("read %s", path)
+    return shape
+
+
+def write_step(shape: TopoDS_Shape, path: str | os.PathLike) -> None:
+    """Write ``shape`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise KernelError(f"output folder does not exist: {folder}")
+    writer = STEPControl_Writer()
+    if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
+        raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    os.close(fd)
+    try:
+        if writer.Write(tmp) != IFSelect_RetDone:
+            raise KernelError(f"the kernel could not write STEP file {path}")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    log.info("wrote %s", path)

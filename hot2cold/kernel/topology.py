@@ -1,0 +1,225 @@
+"""Decomposing a solid into B-spline faces, shared edges and vertices.
+
+The input is converted to B-spline form (planes, cylinders, cones, tori, fillets and surfaces of revolution
+included) with ``BRepBuilderAPI_NurbsConvert`` and copied twice: ``hot`` stays as it is, ``work`` is the
+copy the morph later moves in place.  Every face keeps its edges by reference, so the two faces of a shared
+edge see the very same edge before and after the morph: this is what keeps the cold solid watertight.
+
+Geometry is normalised so that the numeric core can treat it uniformly: periodic surfaces and curves become
+non-periodic, and every surface and edge curve is clamped (end poles on the boundary); an edge curve is
+cut to the edge's range, so its end poles are its vertices (the premise of eq. 10).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from OCP.Bnd import Bnd_Box
+from OCP.BRep import BRep_Tool
+from OCP.BRepBndLib import BRepBndLib
+from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
+from OCP.BRepTools import BRepTools
+from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_SOLID, TopAbs_VERTEX
+from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopLoc import TopLoc_Location
+from OCP.TopoDS import TopoDS, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedMapOfShape
+
+from ..errors import KernelError
+from ..model import Edge, EdgeUse, Face, Part
+from .convert import curve_to_record, surface_to_record
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(eq=False)
+class KernelPart:
+    """The kernel side of a :class:`~hot2cold.model.Part` (opaque to the numeric core).
+
+    ``faces``, ``edges`` and ``vertices`` are shapes of ``work`` in the part's numbering; ``surfaces`` and
+    ``curves`` are their geometry handles with the location that places them (``None`` for degenerate
+    edges).  ``hot_faces`` and ``hot_edges`` are the same shapes in ``hot``.
+    """
+
+    source: TopoDS_Shape
+    hot: TopoDS_Shape
+    work: TopoDS_Shape
+    faces: list
+    edges: list
+    vertices: list
+    surfaces: list
+    curves: list
+    hot_faces: list
+    hot_edges: list
+
+
+def shape_map(shape: TopoDS_Shape, kind) -> list:
+    """Sub-shapes of ``kind`` in ``TopExp.MapShapes`` order, 0-based."""
+    m = TopTools_IndexedMapOfShape()
+    TopExp.MapShapes_s(shape, kind, m)
+    cast = {TopAbs_FACE: TopoDS.Face_s, TopAbs_EDGE: TopoDS.Edge_s, TopAbs_VERTEX: TopoDS.Vertex_s,
+            TopAbs_SOLID: TopoDS.Solid_s}[kind]
+    return [cast(m.FindKey(i)) for i in range(1, m.Size() + 1)]
+
+
+def _index_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:
+    m = TopTools_IndexedMapOfShape()
+    TopExp.MapShapes_s(shape, kind, m)
+    return m
+
+
+def _clamped(knots: list[float], degree: int) -> bool:
+    return (all(k == knots[0] for k in knots[:degree + 1])
+            and all(k == knots[-1] for k in knots[-degree - 1:]))
+
+
+def _normalise_surface(surface: Geom_BSplineSurface) -> None:
+    """Make a face's surface non-periodic and clamped, in place, without changing its geometry."""
+    if surface.IsUPeriodic():
+        surface.SetUNotPeriodic()
+    if surface.IsVPeriodic():
+        surface.SetVNotPeriodic()
+    uk = list(surface.UKnotSequence())
+    vk = list(surface.VKnotSequence())
+    if not (_clamped(uk, surface.UDegree()) and _clamped(vk, surface.VDegree())):
+        u0, u1, v0, v1 = surface.Bounds()
+        surface.Segment(u0, u1, v0, v1)
+
+
+def _normalise_curve(curve: Geom_BSplineCurve, first: float, last: float) -> None:
+    """Make an edge's curve non-periodic, clamped and exactly the edge's range, in place."""
+    if curve.IsPeriodic():
+        curve.SetNotPeriodic()
+    knots = list(curve.KnotSequence())
+    if (not _clamped(knots, curve.Degree()) or curve.FirstParameter() != first
+            or curve.LastParameter() != last):
+        curve.Segment(first, last)
+
+
+def _as_bspline_surface(face) -> tuple[Geom_BSplineSurface, object]:
+    loc = TopLoc_Location()
+    surface = BRep_Tool.Surface_s(face, loc)
+    if not isinstance(surface, Geom_BSplineSurface):
+        raise KernelError(f"face surface is a {surface.DynamicType().Name()} after B-spline conversion")
+    return surface, loc.Transformation()
+
+
+def _as_bspline_curve(edge) -> tuple[Geom_BSplineCurve, object]:
+    loc = TopLoc_Location()
+    curve = BRep_Tool.Curve_s(edge, loc, 0.0, 0.0)
+    if not isinstance(curve, Geom_BSplineCurve):
+        name = "no curve" if curve is None else curve.DynamicType().Name()
+        raise KernelError(f"edge curve is {name} after B-spline conversion")
+    return curve, loc.Transformation()
+
+
+def diagonal(shape: TopoDS_Shape) -> float:
+    """Bounding-box diagonal of ``shape`` in mm."""
+    box = Bnd_Box()
+    BRepBndLib.Add_s(shape, box, False)
+    if box.IsVoid():
+        raise KernelError("the part has an empty bounding box")
+    x0, y0, z0, x1, y1, z1 = box.Get()
+    return float(np.linalg.norm([x1 - x0, y1 - y0, z1 - z0]))
+
+
+def _edge_parameters(curve_record, per_span: int) -> np.ndarray:
+    """Parameters ``(m,)`` on an edge curve: ``per_span`` intervals in every knot span, ends included."""
+    breaks = np.unique(curve_record.knots[curve_record.degree:curve_record.n_poles + 1])
+    pieces = [np.linspace(a, b, per_span + 1)[:-1] for a, b in zip(breaks[:-1], breaks[1:])]
+    return np.concatenate(pieces + [breaks[-1:]])
+
+
+def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
+    """Decompose ``shape`` (a solid or a compound of solids) into a :class:`~hot2cold.model.Part`.
+
+    ``samples_per_span`` sets how densely each edge's pcurve is sampled in every knot span of its curve.
+    """
+    solids = shape_map(shape, TopAbs_SOLID)
+    if not solids:
+        raise KernelError("the shape holds no solid")
+    try:
+        converter = BRepBuilderAPI_NurbsConvert(shape, True)
+        hot = converter.Shape()
+    except Exception as exc:
+        raise KernelError(f"B-spline conversion of the part failed: {exc}") from exc
+
+    # Normalise the hot copy's geometry, then copy it: hot and work share parameterisations exactly.
+    for face in shape_map(hot, TopAbs_FACE):
+        _normalise_surface(_as_bspline_surface(face)[0])
+    for edge in shape_map(hot, TopAbs_EDGE):
+        if not BRep_Tool.Degenerated_s(edge):
+            first, last = BRep_Tool.Range_s(edge)
+            _normalise_curve(_as_bspline_curve(edge)[0], first, last)
+    work = BRepBuilderAPI_Copy(hot, True, False).Shape()
+
+    faces = shape_map(work, TopAbs_FACE)
+    edges = shape_map(work, TopAbs_EDGE)
+    vertices = shape_map(work, TopAbs_VERTEX)
+    face_ids = _index_map(work, TopAbs_FACE)
+    edge_ids = _index_map(work, TopAbs_EDGE)
+    vertex_ids = _index_map(work, TopAbs_VERTEX)
+
+    vertex_points = np.array([[p.X(), p.Y(), p.Z()] for p in (BRep_Tool.Pnt_s(v) for v in vertices)])
+
+    curves, edge_records = [], []
+    for edge in edges:
+        if BRep_Tool.Degenerated_s(edge):
+            curves.append(None)
+            edge_records.append(None)
+            continue
+        curve, trsf = _as_bspline_curve(edge)
+        curves.append((curve, trsf))
+        edge_records.append(curve_to_record(curve, trsf))
+
+    edge_faces: list[list[int]] = [[] for _ in edges]
+    surfaces, face_records = [], []
+    for k, face in enumerate(faces):
+        surface, trsf = _as_bspline_surface(face)
+        surfaces.append((surface, trsf))
+        record = surface_to_record(surface, trsf)
+        uses = []
+        explorer = TopExp_Explorer(face, TopAbs_EDGE)
+        while explorer.More():
+            edge = TopoDS.Edge_s(explorer.Current())
+            e = edge_ids.FindIndex(edge) - 1
+            if k not in edge_faces[e]:
+                edge_faces[e].append(k)
+            first, last = BRep_Tool.Range_s(edge, face)
+            if edge_records[e] is not None:
+                t = _edge_parameters(edge_records[e], samples_per_span)
+            else:
+                t = np.linspace(first, last, 2 * samples_per_span + 1)
+            pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            if pcurve is None:
+                raise KernelError(f"edge {e} of face {k} has no curve on the face")
+            uv = np.array([[p.X(), p.Y()] for p in (pcurve.Value(float(x)) for x in t)])
+            uses.append(EdgeUse(edge=e, t=t, uv=uv))
+            explorer.Next()
+        face_records.append((record, np.array(BRepTools.UVBounds_s(face)), tuple(uses)))
+
+    solid_of_face = np.full(len(faces), -1)
+    solid_faces = []
+    for s, solid in enumerate(solids):
+        members = tuple(face_ids.FindIndex(f) - 1 for f in shape_map(solid, TopAbs_FACE))
+        solid_faces.append(members)
+        solid_of_face[list(members)] = s
+
+    edge_list = []
+    for e, edge in enumerate(edges):
+        forward = edge.Oriented(TopAbs_FORWARD)
+        v0 = vertex_ids.FindIndex(TopExp.FirstVertex_s(TopoDS.Edge_s(forward))) - 1
+        v1 = vertex_ids.FindIndex(TopExp.LastVertex_s(TopoDS.Edge_s(forward))) - 1
+        edge_list.append(Edge(index=e, curve=edge_records[e], vertices=(v0, v1), faces=tuple(edge_faces[e])))
+
+    face_list = [Face(index=k, surface=rec, uv_box=box, uses=uses, solid=int(solid_of_face[k]))
+                 for k, (rec, box, uses) in enumerate(face_records)]
+    kernel = KernelPart(source=shape, hot=hot, work=work, faces=faces, edges=edges, vertices=vertices,
+                        surfaces=surfaces, curves=curves, hot_faces=shape_map(hot, TopAbs_FACE),
+                        hot_edges=shape_map(hot, TopAbs_EDGE))
+    log.info("decomposed %d solid(s): %d faces, %d edges, %d vertices",
+             len(solids), len(faces), len(edges), len(vertices))
+    return Part(faces=face_list, edges=edge_list, vertices=vertex_points, solids=solid_faces,
+                diagonal=diagonal(shape), kernel=kernel)

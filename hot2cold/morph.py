@@ -1,0 +1,160 @@
+"""The hot-to-cold morph, end to end, in the order of the paper.
+
+load -> classify nodes -> edges -> faces -> rebuild -> sew -> report
+"""
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .artificial import FieldEstimator
+from .classify import Classification, classify_nodes
+from .edges import EdgeMorph, morph_edges, vertex_displacements
+from .errors import FieldError, MorphError
+from .faces import FaceMorph, morph_faces
+from .field import DisplacementField, as_field
+from .kernel.check import check_solids
+from .kernel.project import Projector
+from .kernel.rebuild import rebuild
+from .kernel.sew import sew
+from .kernel.shapes import to_cadquery
+from .kernel.step import write_step
+from .load import load_part
+from .model import Part
+from .report import Report, build_report, node_errors
+from .settings import Settings
+
+log = logging.getLogger(__name__)
+
+#: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(eq=False)
+class MorphResult:
+    """What a morph gives back.
+
+    Attributes
+    ----------
+    cold : cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one.
+    hot : cadquery.Shape, the hot part in B-spline form, parameterised as the cold one.
+    report : Report, accuracy and checks.
+    part, classification, faces, edges : the intermediate records, for inspection.
+    """
+
+    cold: object
+    hot: object
+    report: Report
+    part: Part
+    classification: Classification
+    faces: list[FaceMorph]
+    edges: list[EdgeMorph]
+
+    def write_step(self, path: str | os.PathLike) -> None:
+        """Write the cold part to a STEP file (atomically)."""
+        write_step(self.cold.wrapped, path)
+
+
+def morph(hot, field, settings: Settings | None = None, *, units: str = "mm",
+          progress: Progress | None = None) -> MorphResult:
+    """Morph the hot part with an FE displacement field into the cold part.
+
+    Parameters
+    ----------
+    hot : a STEP path, a CadQuery Shape/Workplane/Assembly or a ``TopoDS_Shape``; its solids are morphed.
+    field : a field file path, a :class:`~hot2cold.field.DisplacementField`, or a pair
+        ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
+    settings : tolerances (default :class:`Settings()`).
+    units : length unit of ``field`` when it is read or given as arrays ("mm" or "m").
+    progress : optional callback ``progress(stage, done, total)``.
+
+    Raises
+    ------
+    StepReadError, FieldError : unusable input.
+    MorphError : the cold part is not a valid closed solid.
+    """
+    settings = settings or Settings()
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = round(now - clock, 4)
+        clock = now
+        log.info("%s done in %.2f s", stage, timings[stage])
+
+    def report_progress(stage: str, done: int = 1, total: int = 1) -> None:
+        if progress is not None:
+            progress(stage, done, total)
+
+    field = as_field(field, units)
+    part = load_part(hot, settings)
+    hot_checks = check_solids(part.kernel.hot)
+    lap("load")
+    report_progress("load")
+
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    cls = classify_nodes(part, field, settings, projector)
+    _check_coverage(part, cls, field)
+    lap("classify")
+    report_progress("classify")
+
+    used = cls.used
+    estimator = FieldEstimator(cls.foot[used], field.displacements[used], settings.vertex_neighbours)
+    vertex_disp = vertex_displacements(part, cls, field, estimator)
+    edge_morphs = morph_edges(part, cls, field, vertex_disp, estimator, settings)
+    lap("edges")
+    report_progress("edges")
+
+    face_morphs = morph_faces(part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                              progress=lambda done, total: report_progress("faces", done, total))
+    lap("faces")
+
+    cold_vertices = part.vertices + vertex_disp
+    rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
+    lap("rebuild")
+    gaps = sew(part.kernel)
+    cold_checks = check_solids(part.kernel.work)
+    lap("sew")
+    report_progress("sew")
+
+    errors = node_errors(part, cls, field, cold_vertices, Projector(part.kernel.faces, part.kernel.edges))
+    lap("report")
+    report = build_report(part, cls, field, face_morphs, edge_morphs, errors, gaps, hot_checks, cold_checks,
+                          hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
+                          timings=timings)
+    report_progress("report")
+    result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
+                         part=part, classification=cls, faces=face_morphs, edges=edge_morphs)
+    log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
+    return result
+
+
+def check_result(result: MorphResult) -> None:
+    """Raise :class:`MorphError` unless every cold solid is valid, closed and has its faces."""
+    for s, hot_faces in zip(result.report.solids, result.part.solids):
+        if not s.valid:
+            raise MorphError(f"cold solid {s.index} is not valid (BRepCheck); not written")
+        if not s.closed:
+            raise MorphError(f"cold solid {s.index} has {s.free_edges} free edges; not written")
+        if s.faces != len(hot_faces):
+            raise MorphError(f"cold solid {s.index} has {s.faces} faces, the hot one {len(hot_faces)}")
+
+
+def _check_coverage(part: Part, cls: Classification, field: DisplacementField) -> None:
+    """Raise :class:`FieldError` when no node lies on the part, with a hint at the likely cause."""
+    if cls.used.any():
+        return
+    centre = part.vertices.mean(axis=0) if len(part.vertices) else np.zeros(3)
+    spread = np.linalg.norm(field.points - centre, axis=1)
+    raise FieldError(
+        f"no FE node of {field.source or 'the field'} lies within {cls.node_distance:.3g} mm of the part "
+        f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
+        f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
+        f"this part, or raise --node-distance")

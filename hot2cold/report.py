@@ -1,0 +1,203 @@
+"""Accuracy and the report (eq. 21-22; METHOD step 8).
+
+The fit residual is not the error: each cold target point ``d_k = S(u_k, v_k) + dd_k`` (eq. 5, 28) is
+projected onto the *morphed* face or edge it belongs to, and the distance of that projection is the error
+``Delta_k`` of eq. (21); ``Delta_max`` and ``Delta_mean`` (eq. 22) are reported per face and per edge.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .classify import EDGE, FACE, IGNORED, VERTEX, Classification
+from .edges import EdgeMorph
+from .faces import FaceMorph
+from .field import DisplacementField
+from .kernel.check import SolidCheck
+from .kernel.project import Projector
+from .model import Part
+
+
+@dataclass(frozen=True)
+class FaceReport:
+    """One face: FE nodes, control net, errors (mm), and how the fit went."""
+
+    index: int
+    solid: int
+    nodes: int
+    control_points: str
+    delta_max: float
+    delta_mean: float
+    unknowns: int
+    rank: int
+    condition: float
+    tied_sides: list[str]
+    edge_rows: int
+    artificial_nodes: int
+
+
+@dataclass(frozen=True)
+class EdgeReport:
+    """One edge: FE nodes, control points, errors (mm), and the gap to its faces (mm)."""
+
+    index: int
+    faces: list[int]
+    nodes: int
+    control_points: int
+    delta_max: float
+    delta_mean: float
+    gap: float
+    artificial_nodes: int
+
+
+@dataclass(frozen=True)
+class SolidReport:
+    """One solid: kernel validity, free edges, face count and volumes hot and cold (mm^3)."""
+
+    index: int
+    faces: int
+    valid: bool
+    free_edges: int
+    volume_hot: float
+    volume_cold: float
+
+    @property
+    def closed(self) -> bool:
+        return self.free_edges == 0
+
+
+@dataclass(frozen=True)
+class Report:
+    """Everything a user needs to judge a morph."""
+
+    hot: str
+    field: str
+    nodes_total: int
+    nodes_on_faces: int
+    nodes_on_edges: int
+    nodes_on_vertices: int
+    nodes_ignored: int
+    node_distance: float
+    edge_distance: float
+    max_displacement: float
+    delta_max: float
+    delta_mean: float
+    vertex_delta_max: float
+    valid: bool
+    free_edges: int
+    faces: list[FaceReport]
+    edges: list[EdgeReport]
+    solids: list[SolidReport]
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def nodes_used(self) -> int:
+        return self.nodes_total - self.nodes_ignored
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict (NaN written as null)."""
+        data = asdict(self)
+        data["nodes_used"] = self.nodes_used
+        data["closed"] = self.free_edges == 0
+        return _no_nan(data)
+
+    def to_json(self, path) -> None:
+        """Write the report as JSON to ``path``."""
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(self.to_dict(), fh, indent=2)
+            fh.write("\n")
+
+    def table(self) -> str:
+        """A short text table: per face as the paper's Table 1, then the overall checks."""
+        lines = [f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}"]
+        for f in self.faces:
+            lines.append(f"{f.index:>5} {f.nodes:>9} {f.control_points:>15} {_num(f.delta_max):>10} "
+                         f"{_num(f.delta_mean):>10}")
+        edge_max = max((e.delta_max for e in self.edges if not math.isnan(e.delta_max)), default=float("nan"))
+        gap = max((e.gap for e in self.edges), default=0.0)
+        lines.append(f"edges: {len(self.edges)}, Δmax {_num(edge_max)} mm, largest edge-face gap {_num(gap)} mm")
+        lines.append(f"nodes: {self.nodes_total} total, {self.nodes_used} used "
+                     f"({self.nodes_on_faces} face, {self.nodes_on_edges} edge, {self.nodes_on_vertices} vertex), "
+                     f"{self.nodes_ignored} ignored (farther than {self.node_distance:.3g} mm from every face)")
+        for s in self.solids:
+            lines.append(f"solid {s.index}: {'valid' if s.valid else 'INVALID'}, "
+                         f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
+                         f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
+        lines.append(f"overall: Δmax {_num(self.delta_max)} mm, Δmean {_num(self.delta_mean)} mm, "
+                     f"largest displacement {self.max_displacement:.4g} mm")
+        return "\n".join(lines)
+
+
+def _num(x: float) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2e}"
+
+
+def _no_nan(obj):
+    if isinstance(obj, float):
+        return None if not math.isfinite(obj) else obj
+    if isinstance(obj, dict):
+        return {k: _no_nan(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_no_nan(v) for v in obj]
+    return obj
+
+
+def _stats(d: np.ndarray) -> tuple[float, float]:
+    return (float(d.max()), float(d.mean())) if len(d) else (float("nan"), float("nan"))
+
+
+def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,
+                projector: Projector) -> np.ndarray:
+    """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry (eq. 21).
+
+    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.
+    """
+    errors = np.full(len(cls.role), np.nan)
+    target = cls.foot + field.displacements
+    for role, count, project in ((FACE, len(part.faces), projector.to_face),
+                                 (EDGE, len(part.edges), projector.to_edge)):
+        for k in range(count):
+            nodes = cls.nodes_of(role, k)
+            if len(nodes):
+                errors[nodes] = project(k, target[nodes])[1]
+    at_vertex = np.flatnonzero(cls.role == VERTEX)
+    errors[at_vertex] = np.linalg.norm(target[at_vertex] - cold_vertices[cls.owner[at_vertex]], axis=1)
+    return errors
+
+
+def build_report(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
+                 edge_morphs: list[EdgeMorph], errors: np.ndarray, gaps: np.ndarray,
+                 hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], hot_name: str = "",
+                 timings: dict[str, float] | None = None) -> Report:
+    """Assemble the :class:`Report` of a morph."""
+    faces = []
+    for fm in face_morphs:
+        d = errors[cls.nodes_of(FACE, fm.index)]
+        nu, nv = fm.surface.shape
+        faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
+                                fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
+                                fm.artificial))
+    edges = []
+    for em in edge_morphs:
+        d = errors[cls.nodes_of(EDGE, em.index)]
+        n_poles = 0 if em.curve is None else em.curve.n_poles
+        edges.append(EdgeReport(em.index, list(part.edges[em.index].faces), em.nodes, n_poles, *_stats(d),
+                                float(gaps[em.index]), em.artificial))
+    used = cls.used
+    vertex_err = errors[cls.role == VERTEX]
+    solids = [SolidReport(i, c.faces, c.valid, c.free_edges, h.volume, c.volume)
+              for i, (h, c) in enumerate(zip(hot_checks, cold_checks))]
+    all_err = errors[used]
+    return Report(
+        hot=hot_name, field=field.source, nodes_total=len(cls.role),
+        nodes_on_faces=int(np.sum(cls.role == FACE)), nodes_on_edges=int(np.sum(cls.role == EDGE)),
+        nodes_on_vertices=int(np.sum(cls.role == VERTEX)), nodes_ignored=int(np.sum(cls.role == IGNORED)),
+        node_distance=cls.node_distance, edge_distance=cls.edge_distance,
+        max_displacement=float(np.linalg.norm(field.displacements[used], axis=1).max()) if used.any() else 0.0,
+        delta_max=_stats(all_err)[0], delta_mean=_stats(all_err)[1],
+        vertex_delta_max=_stats(vertex_err)[0],
+        valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
+        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}))
