@@ -1,0 +1,504 @@
+"""The FE displacement field: hot node positions and their displacements to the cold state.
+
+A field is one row per FE node: the hot position ``x, y, z`` and the displacement ``dx, dy, dz`` that
+takes it to the cold (unloaded, room temperature) state.  Inside hot2cold everything is in millimetres.
+
+File formats read by :func:`read_field`
+---------------------------------------
+*Text* (``.csv``, ``.txt``, ``.dat``, any other name): a header line naming at least the columns
+``x, y, z, dx, dy, dz`` in any order and any letter case, then one line per node.  Fields are separated
+by commas, by semicolons (then a decimal comma is accepted: ``1,5;2,25``) or by whitespace; the
+separator is taken from the header line.  A column named ``id``, ``node``, ``node_id``, ``nodeid``,
+``nid`` or ``node_number`` (``Node Number``) becomes :attr:`DisplacementField.node_ids`; any other
+extra column is ignored.  Every line must have as many fields as the header.  ``#`` starts a comment;
+blank lines, surrounding spaces, quotes around names, a UTF-8 byte-order mark and UTF-16 text (with its
+byte-order mark) are tolerated.  A header written as a comment (``# x,y,z,dx,dy,dz`` as ``numpy.savetxt(...,
+header=...)`` writes it) is used when no plain header line precedes the numbers.
+
+*NumPy* ``.npz`` (recognised by its content, whatever the file name): arrays ``points`` (N, 3) and
+``displacements`` (N, 3), optionally ``node_ids`` (N,).
+
+Every problem raises :class:`hot2cold.errors.FieldError` with a one-line message that says what is wrong
+and what to do.
+"""
+from __future__ import annotations
+
+import itertools
+import logging
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from hot2cold.errors import FieldError
+
+__all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "read_field", "as_field"]
+
+log = logging.getLogger(__name__)
+
+#: Length units a field may be given in, and the factor that takes them to millimetres.
+UNITS = {"mm": 1.0, "m": 1000.0}
+
+#: The columns a text field must name (case-insensitive, any order).
+REQUIRED_COLUMNS = ("x", "y", "z", "dx", "dy", "dz")
+
+#: Column names taken as FE node ids (case-insensitive).
+ID_COLUMNS = ("id", "node", "node_id", "nodeid", "nid", "node_number")
+
+_NPZ_MAGIC = b"PK\x03\x04"
+_QUOTES = "\"'"
+
+
+# --------------------------------------------------------------------------------------------------------
+# The field record
+# --------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DisplacementField:
+    """An FE displacement field in millimetres.
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        (N, 3) hot node positions, mm.  Read-only float64, C-contiguous.
+    displacements : numpy.ndarray
+        (N, 3) displacements hot -> cold, mm.  Read-only float64, C-contiguous.
+    node_ids : numpy.ndarray or None
+        (N,) int64 FE node ids if the source had an id column, else ``None``.  Read-only.
+    source : str
+        Where the field came from (a path, ``"arrays"``), for messages.
+
+    The constructor copies the arrays and checks shapes, N >= 1 and finiteness; a violation raises
+    :class:`~hot2cold.errors.FieldError`.
+    """
+
+    points: np.ndarray
+    displacements: np.ndarray
+    node_ids: np.ndarray | None = None
+    source: str = ""
+
+    def __post_init__(self):
+        where = f" ({self.source})" if self.source else ""
+        arrays = {}
+        for name in ("points", "displacements"):
+            try:
+                a = np.array(getattr(self, name), dtype=np.float64, order="C", copy=True)
+            except (TypeError, ValueError) as exc:
+                raise FieldError(
+                    f"field{where}: {name} is not an array of numbers ({_one_line(exc)}); "
+                    f"pass an (N, 3) array of floats") from None
+            if a.ndim != 2 or a.shape[1] != 3:
+                raise FieldError(
+                    f"field{where}: {name} must have shape (N, 3), got shape {a.shape}; "
+                    f"pass one row (x, y, z) per FE node")
+            arrays[name] = a
+        p, d = arrays["points"], arrays["displacements"]
+        if p.shape != d.shape:
+            raise FieldError(
+                f"field{where}: points has shape {p.shape} but displacements has shape {d.shape}; "
+                f"they need one row each per FE node")
+        if len(p) == 0:
+            raise FieldError(f"field{where} has no nodes (shape {p.shape}); it needs at least one FE node")
+        for name, a in arrays.items():
+            bad = ~np.isfinite(a)
+            if bad.any():
+                rows = np.flatnonzero(bad.any(axis=1))
+                raise FieldError(
+                    f"field{where}: {name} has {int(bad.sum())} NaN or inf value(s) in {len(rows)} row(s), "
+                    f"first in row {int(rows[0])} (counting from 0); the field must be finite: "
+                    f"fix or drop those nodes")
+        ids = self.node_ids
+        if ids is not None:
+            try:
+                ids_f = np.asarray(ids)
+                if ids_f.dtype.kind not in "iu":
+                    ids_f = ids_f.astype(np.float64)
+                    if not np.all(np.isfinite(ids_f)) or np.any(ids_f != np.round(ids_f)):
+                        raise ValueError("not all integers")
+                ids = np.array(ids_f, dtype=np.int64, order="C", copy=True)
+            except (TypeError, ValueError, OverflowError) as exc:
+                raise FieldError(
+                    f"field{where}: node_ids must be integers ({_one_line(exc)}); "
+                    f"pass integer ids or node_ids=None") from None
+            if ids.shape != (len(p),):
+                raise FieldError(
+                    f"field{where}: node_ids must have shape ({len(p)},) to match the points, "
+                    f"got shape {ids.shape}")
+            ids.flags.writeable = False
+        p.flags.writeable = False
+        d.flags.writeable = False
+        object.__setattr__(self, "points", p)
+        object.__setattr__(self, "displacements", d)
+        object.__setattr__(self, "node_ids", ids)
+        object.__setattr__(self, "source", str(self.source))
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def __repr__(self) -> str:
+        dmax = float(np.sqrt((self.displacements ** 2).sum(axis=1)).max())
+        ids = "" if self.node_ids is None else ", with node ids"
+        return (f"DisplacementField({_n(len(self), 'node')}, max |d| = {dmax:.6g} mm{ids}, "
+                f"source={self.source!r})")
+
+    def scaled(self, factor: float) -> DisplacementField:
+        """A copy with points and displacements multiplied by ``factor`` (e.g. a unit factor)."""
+        try:
+            f = float(factor)
+        except (TypeError, ValueError):
+            raise FieldError(f"scale factor must be a number, got {factor!r}") from None
+        if not (np.isfinite(f) and f > 0):
+            raise FieldError(f"scale factor must be a positive finite number, got {factor!r}")
+        return DisplacementField(self.points * f, self.displacements * f, self.node_ids, self.source)
+
+
+# --------------------------------------------------------------------------------------------------------
+# Public entry points
+# --------------------------------------------------------------------------------------------------------
+def read_field(path, units: str = "mm") -> DisplacementField:
+    """Read a displacement field from a text table or an ``.npz`` file, scaled to millimetres.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The field file (see the module documentation for the formats).
+    units : str
+        ``"mm"`` (default) or ``"m"``: the length unit of the file; the result is in mm.
+
+    Raises
+    ------
+    FieldError
+        The file is missing or unreadable, or its content is malformed, empty or not finite.
+    """
+    factor = _unit_factor(units)
+    try:
+        fspath = os.fspath(path)
+    except TypeError:
+        raise FieldError(f"field path must be a file name, got {type(path).__name__}") from None
+    if isinstance(fspath, bytes):
+        fspath = os.fsdecode(fspath)
+    fspath = os.path.expanduser(fspath)
+    raw = _read_bytes(fspath)
+    if raw.startswith(_NPZ_MAGIC):
+        field = _parse_npz(fspath)
+        kind = "npz"
+    else:
+        field = _parse_text(raw, fspath)
+        kind = "text"
+    if factor != 1.0:
+        field = field.scaled(factor)
+    log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind, units.strip().lower())
+    return field
+
+
+def as_field(field, units: str = "mm") -> DisplacementField:
+    """Turn what a user passed into a :class:`DisplacementField` in millimetres.
+
+    Accepts a :class:`DisplacementField` (returned as it is; it is already in mm, so ``units`` must be
+    ``"mm"``), a path (``str`` or ``os.PathLike``; see :func:`read_field`), or a pair
+    ``(points, displacements)`` of (N, 3) array-likes in ``units``.
+    """
+    factor = _unit_factor(units)
+    if isinstance(field, DisplacementField):
+        if factor != 1.0:
+            raise FieldError(
+                f"a DisplacementField is already in mm, so units={units!r} cannot apply to it; "
+                f"use field.scaled(...) or pass units='mm'")
+        return field
+    if isinstance(field, (str, bytes, os.PathLike)):
+        return read_field(field, units)
+    if isinstance(field, (tuple, list)) and len(field) == 2:
+        points, displacements = field
+        result = DisplacementField(points, displacements, source="arrays")
+        return result.scaled(factor) if factor != 1.0 else result
+    raise FieldError(
+        f"cannot make a displacement field from {type(field).__name__}: pass a DisplacementField, "
+        f"a file path, or a (points, displacements) pair of (N, 3) arrays")
+
+
+# --------------------------------------------------------------------------------------------------------
+# Helpers
+# --------------------------------------------------------------------------------------------------------
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _unit_factor(units) -> float:
+    key = units.strip().lower() if isinstance(units, str) else None
+    if key not in UNITS:
+        raise FieldError(f"unknown units {units!r} for the field: use one of {', '.join(map(repr, UNITS))}")
+    return UNITS[key]
+
+
+def _read_bytes(path: str) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except FileNotFoundError:
+        raise FieldError(f"field file not found: {path}; check the path") from None
+    except IsADirectoryError:
+        raise FieldError(
+            f"field path is a directory, not a file: {path}; give the field file itself") from None
+    except PermissionError:
+        raise FieldError(f"cannot read field file {path}: permission denied; check its permissions") from None
+    except OSError as exc:
+        raise FieldError(f"cannot read field file {path}: {_one_line(exc)}") from None
+
+
+def _parse_npz(path: str) -> DisplacementField:
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            keys = list(npz.files)
+            missing = [k for k in ("points", "displacements") if k not in keys]
+            if missing:
+                raise FieldError(
+                    f"field file {path} lacks array(s) {', '.join(missing)} (found: "
+                    f"{', '.join(keys) or 'none'}); "
+                    f"save it with np.savez(path, points=..., displacements=...)")
+            points = npz["points"]
+            displacements = npz["displacements"]
+            node_ids = npz["node_ids"] if "node_ids" in keys else None
+    except FieldError:
+        raise
+    except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled objects), OSError, ...
+        raise FieldError(
+            f"cannot read field file {path} as .npz: {_one_line(exc)}; "
+            f"save it with np.savez(path, points=..., displacements=...)") from None
+    return DisplacementField(points, displacements, node_ids, source=path)
+
+
+def _decode(raw: bytes, path: str) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            pass
+    if b"\x00" in raw:
+        raise FieldError(
+            f"field file {path} is binary, neither a text table nor an .npz file; "
+            f"export the field as CSV with columns x,y,z,dx,dy,dz")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        # Numbers and column names are ASCII; other text (ignored columns, comments) may be anything.
+        return raw.removeprefix(b"\xef\xbb\xbf").decode("latin-1")
+
+
+def _split(line: str, delim: str | None) -> list[str]:
+    """The fields of ``line`` (already free of comments): stripped, without quotes."""
+    if delim is None:
+        return [f.strip(_QUOTES) for f in line.split()]
+    return [f.strip().strip(_QUOTES).strip() for f in line.split(delim)]
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _delimiter(header: str) -> str | None:
+    if "," in header:
+        return ","
+    if ";" in header:
+        return ";"
+    return None
+
+
+def _delim_name(delim: str | None) -> str:
+    return {",": "comma-separated", ";": "semicolon-separated", None: "whitespace-separated"}[delim]
+
+
+def _n(count: int, noun: str) -> str:
+    return f"{count} {noun}" + ("" if count == 1 else "s")
+
+
+def _short(text: str, n: int = 60) -> str:
+    text = text.strip()
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+_HINT = "the header must name the columns " + ",".join(REQUIRED_COLUMNS) + " (any order, any case)"
+
+
+def _names(header: str, delim: str | None) -> list[str]:
+    """Normalised column names: lower case, no quotes, inner spaces and dashes as ``_``."""
+    return [re.sub(r"[\s-]+", "_", n.lower()) for n in _split(header, delim)]
+
+
+def _find_header(lines: list[str], path: str) -> tuple[int, str, list[str], str | None]:
+    """(index of the first data line, header text, normalised column names, delimiter)."""
+    for h, line in enumerate(lines):
+        content = line.partition("#")[0].strip()
+        if content:
+            break
+    else:
+        raise FieldError(
+            f"field file {path} has no header and no data; {_HINT}, followed by one line per FE node")
+    delim = _delimiter(content)
+    names = _names(content, delim)
+    if not all(_is_number(n) for n in _split(content, delim)):
+        return h + 1, content, names, delim
+    # The first line holds numbers: a header may have been written as a comment (numpy.savetxt).
+    for c in range(h - 1, -1, -1):
+        text = lines[c].strip()
+        if not text.startswith("#"):
+            continue
+        text = text.lstrip("#").strip()
+        cdelim = _delimiter(text)
+        cnames = _names(text, cdelim)
+        if set(REQUIRED_COLUMNS) <= set(cnames):
+            return h, text, cnames, cdelim
+        break
+    raise FieldError(
+        f"field file {path} has no header line: line {h + 1} ({_short(content)!r}) holds numbers; "
+        f"add a first line naming the columns, e.g. {','.join(REQUIRED_COLUMNS)}")
+
+
+def _parse_text(raw: bytes, path: str) -> DisplacementField:
+    text = _decode(raw, path)
+    if not text.strip():
+        raise FieldError(
+            f"field file {path} is empty; it needs a header line naming {','.join(REQUIRED_COLUMNS)} "
+            f"and one line per FE node")
+    lines = text.splitlines()
+    start, header, names, delim = _find_header(lines, path)
+    shown = _split(header, delim)  # the names as written, for messages
+
+    # Columns.
+    seen = {}
+    for i, n in enumerate(names):
+        if n in seen and (n in REQUIRED_COLUMNS or n in ID_COLUMNS):
+            raise FieldError(
+                f"field file {path}: column {n!r} appears twice in the header; keep one of them")
+        seen.setdefault(n, i)
+    missing = [c for c in REQUIRED_COLUMNS if c not in seen]
+    if missing:
+        found = ", ".join(repr(n) for n in shown)
+        raise FieldError(
+            f"field file {path} lacks column(s) {', '.join(missing)} (header found: {found}, "
+            f"{_delim_name(delim)}); {_HINT}")
+    cols = [seen[c] for c in REQUIRED_COLUMNS]
+    id_col = next((i for i, n in enumerate(names) if n in ID_COLUMNS), None)
+    ncols = len(names)
+
+    # Data lines: comments cut, blank lines dropped; line numbers kept for messages.
+    body = lines[start:]
+    if text.count("#") > sum(ln.count("#") for ln in lines[:start]):
+        body = [ln.partition("#")[0] for ln in body]
+    if "" in body or any(map(str.isspace, body)):
+        keep = [i for i, ln in enumerate(body) if ln.strip()]
+        data = [body[i] for i in keep]
+        lineno = np.asarray(keep, dtype=np.int64) + (start + 1)
+    else:
+        data = body
+        lineno = np.arange(start + 1, start + 1 + len(body), dtype=np.int64)
+    if not data:
+        raise FieldError(
+            f"field file {path} has a header but no data lines; add one line per FE node "
+            f"({', '.join(shown)})")
+    if delim == ";":
+        data = [ln.replace(",", ".") for ln in data]  # decimal comma, as Excel writes it in many locales
+
+    # Numbers, by numpy's C parser; if it fails, a line-by-line pass names the first bad line.  When every
+    # column is needed, loadtxt itself insists on the same number of fields on every line; otherwise the
+    # fields are counted per line first (cheaper than parsing columns nobody needs).
+    needed = cols + ([] if id_col is None else [id_col])
+    if len(needed) != ncols:
+        _check_field_counts(data, lineno, delim, ncols, path)
+    values = ids = None
+    try:
+        table = np.loadtxt(data, delimiter=delim, usecols=None if len(needed) == ncols else needed,
+                           dtype=np.float64, comments=None, ndmin=2, encoding=None)
+        if table.shape == (len(data), ncols if len(needed) == ncols else len(needed)):
+            if len(needed) == ncols:
+                table = table[:, needed]
+            values = table[:, :6]
+            ids = table[:, 6] if id_col is not None else None
+    except Exception:
+        pass
+    if values is None:
+        if len(needed) == ncols:
+            _check_field_counts(data, lineno, delim, ncols, path)
+        try:
+            values = np.loadtxt(data, delimiter=delim, usecols=cols, dtype=np.float64, comments=None,
+                                ndmin=2, encoding=None)
+            if values.shape != (len(data), 6):
+                raise ValueError(f"parsed shape {values.shape}")
+        except Exception as exc:
+            # numpy names the (0-based) row it stopped at: check that one first, to spare a slow pass.
+            m = re.search(r"at row (\d+)", str(exc))
+            if m and int(m.group(1)) < len(data):
+                k = int(m.group(1))
+                _parse_slow(data[k:k + 1], lineno[k:k + 1], delim, cols, shown, path)
+            values = _parse_slow(data, lineno, delim, cols, shown, path)
+        if id_col is not None:
+            ids = _parse_ids(data, delim, id_col)
+
+    finite = np.isfinite(values)
+    if not finite.all():
+        nbad = int((~finite).sum())
+        r, c = np.argwhere(~finite)[0]
+        raise FieldError(
+            f"field file {path} has {nbad} NaN or inf value(s), the first on line {int(lineno[r])} "
+            f"(column {shown[cols[c]]!r}: {values[r, c]}); the field must be finite: "
+            f"fix or remove those lines")
+
+    node_ids = None
+    if ids is not None:
+        if np.all(np.isfinite(ids)) and np.all(ids == np.round(ids)) and np.all(np.abs(ids) <= 2.0 ** 53):
+            node_ids = ids.astype(np.int64)
+        else:
+            log.warning("field file %s: column %r does not hold integers; node ids ignored",
+                        path, shown[id_col])
+    elif id_col is not None:
+        log.warning("field file %s: column %r is not numeric; node ids ignored", path, shown[id_col])
+
+    return DisplacementField(values[:, :3], values[:, 3:], node_ids, source=path)
+
+
+def _check_field_counts(data, lineno, delim, ncols, path) -> None:
+    """Raise if a line has more or fewer fields than the header."""
+    if delim is None:
+        counts = np.fromiter(map(len, map(str.split, data)), dtype=np.int64, count=len(data))
+    else:
+        counts = np.fromiter(map(str.count, data, itertools.repeat(delim)), dtype=np.int64,
+                             count=len(data)) + 1
+    bad = np.flatnonzero(counts != ncols)
+    if bad.size:
+        k = int(bad[0])
+        more = f" ({bad.size} lines like it)" if bad.size > 1 else ""
+        raise FieldError(
+            f"field file {path} line {int(lineno[k])} has {_n(int(counts[k]), 'field')} but the header has "
+            f"{ncols} ({_delim_name(delim)}){more}; give every line one value per header column")
+
+
+def _parse_slow(data, lineno, delim, cols, names, path) -> np.ndarray:
+    """The required columns, line by line; raise naming the first line and column that is no number."""
+    values = np.empty((len(data), 6), dtype=np.float64)
+    for k, ln in enumerate(data):
+        fields = _split(ln, delim)
+        for j, c in enumerate(cols):
+            tok = fields[c]
+            try:
+                values[k, j] = float(tok)
+            except ValueError:
+                what = "is empty" if not tok else f"has {_short(tok, 30)!r}, which is not a number"
+                raise FieldError(
+                    f"field file {path} line {int(lineno[k])}, column {names[c]!r} {what}; "
+                    f"fix or remove that line") from None
+    return values
+
+
+def _parse_ids(data, delim, id_col) -> np.ndarray | None:
+    """The id column as floats, or None if it is not numeric."""
+    try:
+        return np.loadtxt(data, delimiter=delim, usecols=(id_col,), dtype=np.float64, comments=None,
+                          ndmin=1, encoding=None)
+    except Exception:
+        try:
+            return np.array([float(_split(ln, delim)[id_col]) for ln in data], dtype=np.float64)
+        except ValueError:
+            return None
