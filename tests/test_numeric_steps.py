@@ -1,0 +1,91 @@
+"""The numeric steps on their own, without the kernel: edges (eq. 10-20), face ties, artificial nodes."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hot2cold.artificial import FieldEstimator
+from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_curve
+from hot2cold.edges import morph_edge
+from hot2cold.faces import _empty_patches, _side_of
+from hot2cold.model import EdgeUse
+
+RNG = np.random.default_rng(11)
+A = np.array([[0.996, 0.01, 0.0], [-0.01, 0.996, 0.002], [0.0, -0.002, 0.996]])
+B = np.array([0.1, -0.2, 0.05])
+
+
+def _curve(n=8, degree=3, rational=False):
+    inner = np.sort(RNG.uniform(0, 1, n - degree - 1))
+    knots = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)]) * 30.0
+    poles = np.column_stack([np.linspace(0, 30, n), RNG.normal(0, 3, n), RNG.normal(0, 3, n)])
+    return BSplineCurve(poles, knots, degree, RNG.uniform(0.5, 2.0, n) if rational else None)
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_edge_morph_reproduces_an_affine_field(rational):
+    curve = _curve(rational=rational)
+    t = np.linspace(*curve.domain, 200)
+    hot = evaluate_curve(curve, t)
+    disp = hot @ A.T + B - hot
+    ends = curve.poles[[0, -1]] @ A.T + B - curve.poles[[0, -1]]
+    result = morph_edge(curve, t, disp, ends, None, 1.2e-7)
+    assert np.abs(result.curve.poles - (curve.poles @ A.T + B)).max() <= 1e-10
+    assert result.rank == result.unknowns == curve.n_poles - 2
+    # the end poles are exactly the vertex displacements (eq. 10)
+    assert np.array_equal(result.curve.poles[[0, -1]], curve.poles[[0, -1]] + ends)
+
+
+def test_edge_morph_fills_empty_knot_spans_from_the_estimator():
+    curve = _curve(n=10)
+    breaks = np.unique(curve.knots)
+    t = np.linspace(breaks[0], breaks[2], 50, endpoint=False)   # nodes in the first two spans only
+    hot = evaluate_curve(curve, t)
+    disp = hot @ A.T + B - hot
+    ends = curve.poles[[0, -1]] @ A.T + B - curve.poles[[0, -1]]
+    samples = evaluate_curve(curve, np.linspace(*curve.domain, 400))
+    estimator = FieldEstimator(samples, samples @ A.T + B - samples)
+    result = morph_edge(curve, t, disp, ends, estimator, 1.2e-7)
+    assert result.artificial == len(breaks) - 3
+    assert np.abs(result.curve.poles - (curve.poles @ A.T + B)).max() <= 1e-8
+
+
+def test_field_estimator_is_exact_for_affine_fields_and_extrapolates():
+    pts = RNG.uniform(0, 10, (300, 3))
+    est = FieldEstimator(pts, pts @ A.T + B - pts, neighbours=12)
+    far = np.array([[15.0, -3.0, 12.0], [5.0, 5.0, 5.0]])
+    assert np.abs(est(far) - (far @ A.T + B - far)).max() <= 1e-10
+
+
+def test_field_estimator_handles_coplanar_points():
+    xy = RNG.uniform(0, 10, (100, 2))
+    pts = np.column_stack([xy, np.full(100, 2.0)])
+    est = FieldEstimator(pts, pts @ A.T + B - pts)
+    q = np.array([[3.0, 4.0, 2.0]])
+    assert np.abs(est(q) - (q @ A.T + B - q)).max() <= 1e-10
+
+
+def _surface():
+    u = np.concatenate([np.zeros(4), [0.5], np.ones(4)])
+    v = np.concatenate([np.zeros(3), [0.3, 0.6], np.ones(3)])
+    poles = RNG.normal(size=(5, 5, 3))
+    return BSplineSurface(poles, u, v, 3, 2)
+
+
+@pytest.mark.parametrize("uv, expected", [
+    (np.column_stack([np.zeros(5), np.linspace(0, 1, 5)]), ("u0", False)),
+    (np.column_stack([np.ones(5), np.linspace(1, 0, 5)]), ("u1", True)),
+    (np.column_stack([np.linspace(0, 1, 5), np.ones(5)]), ("v1", False)),
+    (np.column_stack([np.zeros(5), np.linspace(0, 0.7, 5)]), None),          # part of a side only
+    (np.column_stack([np.linspace(0, 1, 5), np.linspace(0, 1, 5)]), None),   # a diagonal trim curve
+])
+def test_side_detection(uv, expected):
+    assert _side_of(_surface(), EdgeUse(edge=0, t=np.linspace(0, 1, len(uv)), uv=uv)) == expected
+
+
+def test_empty_patches_are_the_knot_span_patches_without_data():
+    surface = _surface()
+    uv = np.array([[0.25, 0.1], [0.75, 0.1], [0.25, 0.45]])
+    centres = _empty_patches(surface, uv)
+    # 2 x 3 patches, 3 hold data; centres of the other 3 (eq. 39)
+    assert sorted(map(tuple, np.round(centres, 6))) == [(0.25, 0.8), (0.75, 0.45), (0.75, 0.8)]
