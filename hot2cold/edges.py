@@ -33,7 +33,7 @@ class EdgeMorph:
     index : int, the edge.
     curve : BSplineCurve or None, the morphed curve (None for a degenerate edge).
     nodes : int, FE nodes that fed the edge.
-    artificial : int, artificial nodes added in knot spans without a node.
+    artificial : int, artificial nodes added in knot spans with fewer than degree + 1 nodes.
     unknowns : int, inner poles solved for (3 coordinates each).
     rank : int, rank kept by the truncated SVD.
     condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
@@ -60,11 +60,19 @@ def vertex_displacements(part: Part, cls: Classification, field: DisplacementFie
     return disp
 
 
-def _empty_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
-    """Midpoints ``(m,)`` of the knot spans of ``curve`` that hold no parameter of ``t``."""
+def _sparse_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
+    """Parameters ``(m,)`` of artificial nodes for the knot spans of ``curve`` that hold fewer than
+    ``degree + 1`` of the parameters ``t``.
+
+    A span's polynomial piece has ``degree + 1`` coefficients; with fewer data it is not determined by the
+    nodes (an empty span is the paper's case, a span with a node or two is the same problem on thin
+    faces such as a trailing edge).  Such a span gets ``degree + 1`` artificial nodes spread over it.
+    """
     breaks = np.unique(curve.knots[curve.degree:curve.n_poles + 1])
     counts, _ = np.histogram(t, bins=breaks)
-    return 0.5 * (breaks[:-1] + breaks[1:])[counts == 0]
+    inside = (np.arange(curve.degree + 1) + 0.5) / (curve.degree + 1)
+    sparse = np.flatnonzero(counts < curve.degree + 1)
+    return (breaks[sparse, None] + inside * (breaks[sparse + 1] - breaks[sparse])[:, None]).ravel()
 
 
 def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
@@ -76,7 +84,7 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     curve : the hot curve, n poles.
     t : (s,) foot-point parameters of the edge's nodes; disp : (s, 3) their displacements.
     end_disp : (2, 3) displacements of the start and end vertex (eq. 10).
-    estimator : gives artificial nodes in knot spans without a node (None: none are added).
+    estimator : gives artificial nodes in knot spans with too few nodes (None: none are added).
     epsilon : machine-precision factor of the SVD cut-off (eq. 20).
     """
     n = curve.n_poles
@@ -84,7 +92,7 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     delta[0], delta[-1] = end_disp
     artificial = 0
     if estimator is not None and n > 2:
-        t_art = _empty_spans(curve, t)
+        t_art = _sparse_spans(curve, t)
         if len(t_art):
             artificial = len(t_art)
             t = np.concatenate([t, t_art])

@@ -2,15 +2,16 @@
 
 A face's boundary rows of poles come from its morphed edges wherever an edge runs along a whole side of
 the surface's domain with the same degree, knots and weights as that row (for an untrimmed face the four
-sides u=0, u=1, v=0, v=1 are its edges, eq. 32-36): those rows are set to the edge's morphed poles
-exactly, so the two faces of an edge meet without a gap.  The remaining poles solve eq. (38),
+sides u=0, u=1, v=0, v=1 are its edges, eq. 32-36): those rows take the edge's pole displacements
+exactly, so the two faces of an edge meet as they met when hot (the rows and the edge's poles agree to
+rounding in a B-spline-converted part; a zero field leaves every pole bit for bit where it was).  The remaining poles solve eq. (38),
 
     sum_{i,j free} N_i(u_k) N_j(v_k) dp_ij = dd_k - sum_{i,j fixed} N_i(u_k) N_j(v_k) dp_ij,
 
 over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20).
 Edges that are not a whole side (trimmed faces, split sides) add rows that hold the surface to the morphed
-edge at points along the edge's curve on the face, and knot-span patches without any data get an
-artificial node at their centre (eq. 39) so that no pole is left undetermined.
+edge at points along the edge's curve on the face, and knot-span patches with too few data get artificial nodes (eq. 39) so that
+no pole is left undetermined.
 """
 from __future__ import annotations
 
@@ -44,8 +45,8 @@ class FaceMorph:
     surface : BSplineSurface, the morphed surface (same degrees, knots and weights).
     nodes : int, FE nodes in the face interior.
     edge_rows : int, rows that hold the surface to edges that are not whole sides.
-    artificial : int, artificial nodes added in empty knot-span patches.
-    tied_sides : tuple of str, sides whose poles were set from a morphed edge ("u0", "u1", "v0", "v1").
+    artificial : int, artificial nodes added in knot-span patches with too few data.
+    tied_sides : tuple of str, sides whose poles moved with a morphed edge ("u0", "u1", "v0", "v1").
     unknowns : int, poles solved for.
     rank : int, rank kept by the truncated SVD.
     condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
@@ -90,8 +91,8 @@ def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tu
 
 def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray,
          tol: float) -> tuple[str, np.ndarray] | None:
-    """If ``use`` is a whole side compatible with the surface's row there, the side and its morphed
-    poles ``(row length, 3)``; else None."""
+    """If ``use`` is a whole side compatible with the surface's row there, the side and the displacements
+    ``(row length, 3)`` of that row's poles; else None."""
     found = _side_of(face.surface, use)
     if found is None:
         return None
@@ -102,7 +103,7 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
     if edge.degenerate:
         if np.ptp(row, axis=0).max() > tol:
             return None
-        return side, row + vertex_disp[edge.vertices[0]]
+        return side, np.broadcast_to(vertex_disp[edge.vertices[0]], row.shape)
     curve = edge.curve
     knots = surface.v_knots if SIDES[side][0] == 0 else surface.u_knots
     degree = surface.v_degree if SIDES[side][0] == 0 else surface.u_degree
@@ -121,19 +122,32 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
     ratio = row_w / (np.ones(len(row)) if weights is None else weights)
     if not np.allclose(ratio, ratio[0], rtol=1e-9, atol=0):
         return None
-    return side, morphed
+    return side, morphed - poles
 
 
-def _empty_patches(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
-    """Centres ``(m, 2)`` of the knot-span patches (eq. 39) that hold no parameter pair of ``uv``."""
+def _sparse_patches(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
+    """Parameters ``(m, 2)`` of artificial nodes for the knot-span patches ``[U_r, U_r+1) x [V_s, V_s+1)``
+    that hold fewer than ``(p + 1)(q + 1)`` parameter pairs of ``uv``.
+
+    The paper puts one artificial node at the centre of an empty patch (eq. 39); one node cannot fix the
+    ``(p + 1)(q + 1)`` coefficients of a patch's polynomial piece, so such a patch (empty, trimmed away, or
+    nearly empty) gets a ``(p + 1) x (q + 1)`` grid of them.
+    """
+    p, q = surface.u_degree, surface.v_degree
     nu, nv = surface.shape
-    ub = np.unique(surface.u_knots[surface.u_degree:nu + 1])
-    vb = np.unique(surface.v_knots[surface.v_degree:nv + 1])
-    counts, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], bins=[ub, vb]) if len(uv) else (
-        np.zeros((len(ub) - 1, len(vb) - 1)), None, None)
-    uc, vc = 0.5 * (ub[:-1] + ub[1:]), 0.5 * (vb[:-1] + vb[1:])
-    i, j = np.nonzero(counts == 0)
-    return np.column_stack([uc[i], vc[j]])
+    ub = np.unique(surface.u_knots[p:nu + 1])
+    vb = np.unique(surface.v_knots[q:nv + 1])
+    if len(uv):
+        counts = np.histogram2d(uv[:, 0], uv[:, 1], bins=[ub, vb])[0]
+    else:
+        counts = np.zeros((len(ub) - 1, len(vb) - 1))
+    r, s = np.nonzero(counts < (p + 1) * (q + 1))
+    fu = (np.arange(p + 1) + 0.5) / (p + 1)
+    fv = (np.arange(q + 1) + 0.5) / (q + 1)
+    gu, gv = np.meshgrid(fu, fv, indexing="ij")
+    u = ub[r, None] + gu.ravel() * (ub[r + 1] - ub[r])[:, None]
+    v = vb[s, None] + gv.ravel() * (vb[s + 1] - vb[s])[:, None]
+    return np.column_stack([u.ravel(), v.ravel()])
 
 
 def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
@@ -150,9 +164,9 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     for use in face.uses:
         tie = _tie(face, use, part, edge_morphs, vertex_disp, tol)
         if tie is not None:
-            side, morphed_row = tie
+            side, row_disp = tie
             index = _row(delta, side)
-            delta[index] = morphed_row - surface.poles[index]
+            delta[index] = row_disp
             fixed[index] = True
             tied.append(side)
             continue
@@ -172,7 +186,7 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     uv = np.concatenate(uv_rows)
     target = np.concatenate(target_rows)
 
-    centres = _empty_patches(surface, uv)
+    centres = _sparse_patches(surface, uv)
     if len(centres):
         uv = np.concatenate([uv, centres])
         target = np.concatenate([target, estimator(evaluate_surface(surface, centres[:, 0], centres[:, 1]))])

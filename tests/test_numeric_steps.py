@@ -7,7 +7,7 @@ import pytest
 from hot2cold.artificial import FieldEstimator
 from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_curve
 from hot2cold.edges import morph_edge
-from hot2cold.faces import _empty_patches, _side_of
+from hot2cold.faces import _side_of, _sparse_patches
 from hot2cold.model import EdgeUse
 
 RNG = np.random.default_rng(11)
@@ -46,7 +46,7 @@ def test_edge_morph_fills_empty_knot_spans_from_the_estimator():
     samples = evaluate_curve(curve, np.linspace(*curve.domain, 400))
     estimator = FieldEstimator(samples, samples @ A.T + B - samples)
     result = morph_edge(curve, t, disp, ends, estimator, 1.2e-7)
-    assert result.artificial == len(breaks) - 3
+    assert result.artificial == (len(breaks) - 3) * (curve.degree + 1)   # degree + 1 in each empty span
     assert np.abs(result.curve.poles - (curve.poles @ A.T + B)).max() <= 1e-8
 
 
@@ -83,9 +83,11 @@ def test_side_detection(uv, expected):
     assert _side_of(_surface(), EdgeUse(edge=0, t=np.linspace(0, 1, len(uv)), uv=uv)) == expected
 
 
-def test_empty_patches_are_the_knot_span_patches_without_data():
-    surface = _surface()
-    uv = np.array([[0.25, 0.1], [0.75, 0.1], [0.25, 0.45]])
-    centres = _empty_patches(surface, uv)
-    # 2 x 3 patches, 3 hold data; centres of the other 3 (eq. 39)
-    assert sorted(map(tuple, np.round(centres, 6))) == [(0.25, 0.8), (0.75, 0.45), (0.75, 0.8)]
+def test_sparse_patches_get_a_grid_of_artificial_nodes():
+    surface = _surface()                                  # 2 x 3 patches of degrees (3, 2)
+    full = np.column_stack([np.repeat(np.linspace(0.01, 0.49, 4), 3), np.tile(np.linspace(0.01, 0.29, 3), 4)])
+    uv = np.concatenate([full, [[0.75, 0.1], [0.25, 0.45]]])   # patch (0, 0) full, two with one node
+    nodes = _sparse_patches(surface, uv)
+    assert len(nodes) == 5 * 4 * 3                      # five patches below 12 data, a 4 x 3 grid each
+    counts = np.histogram2d(nodes[:, 0], nodes[:, 1], bins=[[0, 0.5, 1], [0, 0.3, 0.6, 1]])[0]
+    assert counts.tolist() == [[0, 12, 12], [12, 12, 12]]

@@ -328,7 +328,7 @@ def test_field_files(name, field_name, low, high, make_samples, blade, block):
     assert low < np.linalg.norm(disp, axis=1).max() < high
     # the file holds exactly the seed-0 FE surface nodes of the part plus 500 volume nodes, shuffled
     solid = {"twisted_blade": blade, "filleted_block": block}[name]
-    surface, face_index = fe_surface_nodes(solid, make_samples.SPACING, seed=make_samples.SEED)
+    surface, face_index = fe_surface_nodes(solid, make_samples.SPACING[name], seed=make_samples.SEED)
     assert len(data) == len(surface) + make_samples.N_VOLUME
     d, _ = cKDTree(xyz).query(surface)
     assert d.max() < 1e-9

@@ -1,0 +1,65 @@
+"""Shared fixtures: the bundled sample parts and FE-like node sets on them."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hot2cold.bspline import evaluate_surface
+from hot2cold.kernel.sampling import face_samples, fe_surface_nodes, volume_nodes
+from hot2cold.kernel.step import read_step
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
+
+
+@pytest.fixture(scope="session")
+def blade_step() -> Path:
+    return SAMPLES / "twisted_blade.step"
+
+
+@pytest.fixture(scope="session")
+def block_step() -> Path:
+    return SAMPLES / "filleted_block.step"
+
+
+@pytest.fixture(scope="session")
+def blade_shape(blade_step):
+    return read_step(blade_step)
+
+
+@pytest.fixture(scope="session")
+def block_shape(block_step):
+    return read_step(block_step)
+
+
+@pytest.fixture(scope="session")
+def blade_nodes(blade_shape) -> np.ndarray:
+    """FE-like surface nodes on the blade, 0.6 mm apart (about 25 000): every knot-span patch holds nodes."""
+    return fe_surface_nodes(blade_shape, 0.6, seed=1)[0]
+
+
+@pytest.fixture(scope="session")
+def block_nodes(block_shape) -> np.ndarray:
+    return fe_surface_nodes(block_shape, 1.5, seed=2)[0]
+
+
+@pytest.fixture(scope="session")
+def blade_volume_nodes(blade_shape) -> np.ndarray:
+    return volume_nodes(blade_shape, 300, seed=3)
+
+
+def face_deviation(result, exact_map, spacing: float) -> list[np.ndarray]:
+    """Per face, distances ``(m,)`` between the cold surface and ``exact_map`` of the hot surface at the same
+    parameters, on points sampled over the face's trimmed domain.
+
+    The morph fits ``S_cold(u_k, v_k) = S_hot(u_k, v_k) + dd_k`` (eq. 30), so this parametric distance is the
+    error of the fit, and an upper bound of the distance between the two surfaces.
+    """
+    out = []
+    for (uv, _), face, morphed in zip(face_samples(result.hot.wrapped, spacing), result.part.faces,
+                                      result.faces):
+        hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1])
+        cold = evaluate_surface(morphed.surface, uv[:, 0], uv[:, 1])
+        out.append(np.linalg.norm(cold - exact_map(hot), axis=1))
+    return out

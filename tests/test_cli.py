@@ -1,0 +1,133 @@
+"""The command line: a real run on a sample part, and every refusal as one line with an exit code."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hot2cold.cli import main
+from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.step import read_step
+from hot2cold.synthetic import AffineField
+
+FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
+
+
+def _write_field(path, points, disp, header="id,x,y,z,dx,dy,dz"):
+    rows = np.column_stack([np.arange(len(points)), points, disp])
+    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt="%.12g")
+    return path
+
+
+@pytest.fixture
+def block_field(tmp_path, block_nodes):
+    return _write_field(tmp_path / "field.csv", block_nodes, FIELD(block_nodes))
+
+
+def test_morph_writes_valid_cold_step_and_report(tmp_path, block_step, block_field, capsys):
+    out, report = tmp_path / "cold.step", tmp_path / "report.json"
+    code = main(["morph", str(block_step), str(block_field), "-o", str(out), "--report", str(report)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "Δmax" in printed and "valid, closed" in printed
+    data = json.loads(report.read_text())
+    assert data["valid"] and data["closed"] and data["free_edges"] == 0
+    assert data["delta_max"] <= 1e-7
+    assert len(data["faces"]) == check_solids(read_step(out))[0].faces
+    assert all({"nodes", "control_points", "delta_max", "delta_mean"} <= set(f) for f in data["faces"])
+    assert data["nodes_used"] + data["nodes_ignored"] == data["nodes_total"]
+    checks = check_solids(read_step(out))
+    assert checks[0].valid and checks[0].closed
+
+
+def test_field_in_metres_is_scaled(tmp_path, block_step, block_nodes):
+    field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0, FIELD(block_nodes) / 1000.0)
+    out = tmp_path / "cold.step"
+    assert main(["morph", str(block_step), str(field), "-o", str(out), "--field-units", "m", "-q"]) == 0
+    assert out.exists()
+
+
+def _refused(capsys, argv, code, *words):
+    assert main(argv) == code
+    lines = capsys.readouterr().err.strip().splitlines()
+    # progress lines may come first; the error is one line, the last
+    err = lines[-1]
+    assert err.startswith("hot2cold: error: ")
+    assert sum("error" in line for line in lines) == 1
+    assert not any("Traceback" in line for line in lines)
+    for word in words:
+        assert word in err
+    return err
+
+
+def test_missing_step(tmp_path, block_field, capsys):
+    out = tmp_path / "cold.step"
+    _refused(capsys, ["morph", str(tmp_path / "nope.step"), str(block_field), "-o", str(out)], 2, "not found")
+    assert not out.exists()
+
+
+def test_unreadable_step(tmp_path, block_field, capsys):
+    bad = tmp_path / "bad.step"
+    bad.write_text("this is not STEP\n")
+    out = tmp_path / "cold.step"
+    _refused(capsys, ["morph", str(bad), str(block_field), "-o", str(out)], 2, "STEP")
+    assert not out.exists()
+
+
+def test_step_without_solid(tmp_path, block_field, capsys):
+    import cadquery as cq
+    from hot2cold.kernel.step import write_step
+    face_only = tmp_path / "face.step"
+    write_step(cq.Face.makePlane(10, 10).wrapped, face_only)
+    out = tmp_path / "cold.step"
+    _refused(capsys, ["morph", str(face_only), str(block_field), "-o", str(out)], 2, "no solid")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("content, words", [
+    ("x,y,z,dx,dy\n1,2,3,4,5\n", ("dz",)),
+    ("x,y,z,dx,dy,dz\n", ("no",)),
+    ("x,y,z,dx,dy,dz\n1,2,3,nan,0,0\n", ("NaN",)),
+    ("x,y,z,dx,dy,dz\n1,2,3,inf,0,0\n", ("inf",)),
+])
+def test_bad_field_files(tmp_path, block_step, capsys, content, words):
+    field = tmp_path / "field.csv"
+    field.write_text(content)
+    out = tmp_path / "cold.step"
+    _refused(capsys, ["morph", str(block_step), str(field), "-o", str(out)], 2, *words)
+    assert not out.exists()
+
+
+def test_no_node_near_the_part(tmp_path, block_step, block_nodes, capsys):
+    # a field in metres read as millimetres: every node sits near the origin, far from the faces
+    field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0 + 100.0, FIELD(block_nodes) / 1000.0)
+    out = tmp_path / "cold.step"
+    _refused(capsys, ["morph", str(block_step), str(field), "-o", str(out)], 2, "no FE node", "units")
+    assert not out.exists()
+
+
+def test_output_equal_to_input_is_refused(tmp_path, block_step, block_field, capsys):
+    import shutil
+    hot = tmp_path / "hot.step"
+    shutil.copy(block_step, hot)
+    before = hot.read_bytes()
+    _refused(capsys, ["morph", str(hot), str(block_field), "-o", str(hot)], 2, "input")
+    assert hot.read_bytes() == before
+
+
+def test_missing_output_folder(tmp_path, block_step, block_field, capsys):
+    _refused(capsys, ["morph", str(block_step), str(block_field), "-o", str(tmp_path / "no" / "c.step")], 2,
+             "does not exist")
+
+
+def test_console_script_runs_without_traceback(tmp_path, block_step):
+    field = tmp_path / "field.csv"
+    field.write_text("x,y,z,dx,dy\n")
+    proc = subprocess.run([sys.executable, "-m", "hot2cold", "morph", str(block_step), str(field), "-o",
+                           str(tmp_path / "c.step")], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("hot2cold: error:") and "Traceback" not in proc.stderr
+    assert not (tmp_path / "c.step").exists()
