@@ -15,7 +15,7 @@ Conventions
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from math import comb as _comb
 
 import numpy as np

@@ -7,8 +7,7 @@ import pytest
 from hot2cold.bspline import evaluate_surface
 from hot2cold.classify import IGNORED
 from hot2cold.kernel.convert import surface_to_record
-from hot2cold.kernel.step import read_step, write_step
-from hot2cold.kernel.topology import decompose
+from hot2cold.kernel.step import read_step
 from hot2cold.morph import morph
 from hot2cold.synthetic import AffineField, UntwistField, ZeroField
 
@@ -21,8 +20,8 @@ UNTWIST = UntwistField(axis_point=(0.0, 0.0, 0.0), untwist_deg_per_mm=0.02, stre
 
 def _cold_poles(result) -> list[np.ndarray]:
     """Control nets read back from the cold kernel shape (not from the numeric records)."""
-    from hot2cold.kernel.topology import _as_bspline_surface  # the kernel's own view of the faces
-    return [surface_to_record(*_as_bspline_surface(face)).poles for face in result.part.kernel.faces]
+    from hot2cold.kernel.topology import bspline_surface
+    return [surface_to_record(*bspline_surface(face)).poles for face in result.part.kernel.faces]
 
 
 @pytest.mark.parametrize("part", ["block", "blade"])

@@ -1,7 +1,7 @@
 """Points on and in a solid: face samples, an FE-like surface node set and volume nodes.
 
-The face numbering of the whole project is defined here: :func:`face_list` returns the faces in the order of
-``TopExp.MapShapes_s(shape, TopAbs_FACE, map)``, so face ``k`` (from 0) is map index ``k + 1``.
+Faces and edges are numbered as everywhere in the project (:func:`.topology.shape_map`): face ``k`` (from 0)
+is index ``k + 1`` of ``TopExp.MapShapes_s(shape, TopAbs_FACE, map)``.
 
 Location handling (checked on OCP 7.9): ``BRep_Tool.Surface_s(face)`` returns the surface with the face's
 ``TopLoc_Location`` already applied (a transformed copy when the location is not the identity; its
@@ -34,10 +34,10 @@ from OCP.GeomLProp import GeomLProp_SLProps
 from OCP.gp import gp_Pnt, gp_Pnt2d
 from OCP.Precision import Precision
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_IN, TopAbs_REVERSED, TopAbs_VERTEX
-from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
-from OCP.TopTools import TopTools_IndexedMapOfShape
 from scipy.spatial import cKDTree
+
+from .topology import index_map, shape_map
 
 log = logging.getLogger(__name__)
 
@@ -47,27 +47,14 @@ _COARSE = 41
 _MAX_REFINE = 6
 
 
-def _shape_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:
-    m = TopTools_IndexedMapOfShape()
-    TopExp.MapShapes_s(shape, kind, m)
-    return m
-
-
 def face_list(shape: TopoDS_Shape) -> list[TopoDS_Face]:
-    """The faces of ``shape`` in the project's numbering.
-
-    Face ``k`` (from 0) is index ``k + 1`` of ``TopExp.MapShapes_s(shape, TopAbs_FACE, map)``; a face
-    shared by several solids of a compound appears once.
-    """
-    m = _shape_map(shape, TopAbs_FACE)
-    return [TopoDS.Face_s(m.FindKey(i)) for i in range(1, m.Extent() + 1)]
+    """The faces of ``shape`` in the project's numbering (see :func:`.topology.shape_map`)."""
+    return shape_map(shape, TopAbs_FACE)
 
 
 def edge_list(shape: TopoDS_Shape) -> list[TopoDS_Edge]:
-    """The edges of ``shape`` in ``TopExp.MapShapes_s(shape, TopAbs_EDGE, map)`` order (edge ``k`` is map
-    index ``k + 1``); an edge shared by two faces appears once."""
-    m = _shape_map(shape, TopAbs_EDGE)
-    return [TopoDS.Edge_s(m.FindKey(i)) for i in range(1, m.Extent() + 1)]
+    """The edges of ``shape`` in the project's numbering (see :func:`.topology.shape_map`)."""
+    return shape_map(shape, TopAbs_EDGE)
 
 
 def _pnt(p: gp_Pnt) -> tuple[float, float, float]:
@@ -238,11 +225,11 @@ def fe_surface_nodes(shape: TopoDS_Shape, spacing: float, seed: int = 0, jitter:
     clearance = spacing / 3 if clearance is None else float(clearance)
     rng = np.random.default_rng(seed)
 
-    vmap = _shape_map(shape, TopAbs_VERTEX)
+    vmap = index_map(shape, TopAbs_VERTEX)
     vertices = np.array([_pnt(BRep_Tool.Pnt_s(TopoDS.Vertex_s(vmap.FindKey(i))))
                          for i in range(1, vmap.Extent() + 1)]).reshape(-1, 3)
 
-    emap = _shape_map(shape, TopAbs_EDGE)
+    emap = index_map(shape, TopAbs_EDGE)
     edges = [TopoDS.Edge_s(emap.FindKey(i)) for i in range(1, emap.Extent() + 1)]
     edge_nodes = [_edge_points(e, spacing, ends=False) for e in edges]
     dense = [_edge_points(e, spacing / 8, ends=True) for e in edges]  # boundary polylines for clearance
@@ -256,8 +243,8 @@ def fe_surface_nodes(shape: TopoDS_Shape, spacing: float, seed: int = 0, jitter:
         uv = grid.uv(s, t)
         uv = uv[grid.inside(uv)]
         pts = _evaluate(grid.surface, uv[:, 0], uv[:, 1])
-        fmap = _shape_map(face, TopAbs_EDGE)
-        fvmap = _shape_map(face, TopAbs_VERTEX)
+        fmap = index_map(face, TopAbs_EDGE)
+        fvmap = index_map(face, TopAbs_VERTEX)
         boundary = [dense[emap.FindIndex(fmap.FindKey(i)) - 1] for i in range(1, fmap.Extent() + 1)]
         boundary += [vertices[vmap.FindIndex(fvmap.FindKey(i)) - 1][None] for i in range(1, fvmap.Extent() + 1)]
         boundary = np.concatenate(boundary) if boundary else np.empty((0, 3))

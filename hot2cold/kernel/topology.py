@@ -56,15 +56,15 @@ class KernelPart:
 
 
 def shape_map(shape: TopoDS_Shape, kind) -> list:
-    """Sub-shapes of ``kind`` in ``TopExp.MapShapes`` order, 0-based."""
-    m = TopTools_IndexedMapOfShape()
-    TopExp.MapShapes_s(shape, kind, m)
+    """Sub-shapes of ``kind`` in ``TopExp.MapShapes`` order, 0-based: the project's numbering."""
+    m = index_map(shape, kind)
     cast = {TopAbs_FACE: TopoDS.Face_s, TopAbs_EDGE: TopoDS.Edge_s, TopAbs_VERTEX: TopoDS.Vertex_s,
             TopAbs_SOLID: TopoDS.Solid_s}[kind]
     return [cast(m.FindKey(i)) for i in range(1, m.Size() + 1)]
 
 
-def _index_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:
+def index_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:
+    """The kernel's indexed map of the sub-shapes of ``kind`` (1-based; ``FindIndex`` gives k + 1)."""
     m = TopTools_IndexedMapOfShape()
     TopExp.MapShapes_s(shape, kind, m)
     return m
@@ -98,7 +98,8 @@ def _normalise_curve(curve: Geom_BSplineCurve, first: float, last: float) -> Non
         curve.Segment(first, last)
 
 
-def _as_bspline_surface(face) -> tuple[Geom_BSplineSurface, object]:
+def bspline_surface(face) -> tuple[Geom_BSplineSurface, object]:
+    """The face's own ``Geom_BSplineSurface`` (not a copy) and the ``gp_Trsf`` that places it."""
     loc = TopLoc_Location()
     surface = BRep_Tool.Surface_s(face, loc)
     if not isinstance(surface, Geom_BSplineSurface):
@@ -106,7 +107,8 @@ def _as_bspline_surface(face) -> tuple[Geom_BSplineSurface, object]:
     return surface, loc.Transformation()
 
 
-def _as_bspline_curve(edge) -> tuple[Geom_BSplineCurve, object]:
+def bspline_curve(edge) -> tuple[Geom_BSplineCurve, object]:
+    """The edge's own ``Geom_BSplineCurve`` (not a copy) and the ``gp_Trsf`` that places it."""
     loc = TopLoc_Location()
     curve = BRep_Tool.Curve_s(edge, loc, 0.0, 0.0)
     if not isinstance(curve, Geom_BSplineCurve):
@@ -148,19 +150,19 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
 
     # Normalise the hot copy's geometry, then copy it: hot and work share parameterisations exactly.
     for face in shape_map(hot, TopAbs_FACE):
-        _normalise_surface(_as_bspline_surface(face)[0])
+        _normalise_surface(bspline_surface(face)[0])
     for edge in shape_map(hot, TopAbs_EDGE):
         if not BRep_Tool.Degenerated_s(edge):
             first, last = BRep_Tool.Range_s(edge)
-            _normalise_curve(_as_bspline_curve(edge)[0], first, last)
+            _normalise_curve(bspline_curve(edge)[0], first, last)
     work = BRepBuilderAPI_Copy(hot, True, False).Shape()
 
     faces = shape_map(work, TopAbs_FACE)
     edges = shape_map(work, TopAbs_EDGE)
     vertices = shape_map(work, TopAbs_VERTEX)
-    face_ids = _index_map(work, TopAbs_FACE)
-    edge_ids = _index_map(work, TopAbs_EDGE)
-    vertex_ids = _index_map(work, TopAbs_VERTEX)
+    face_ids = index_map(work, TopAbs_FACE)
+    edge_ids = index_map(work, TopAbs_EDGE)
+    vertex_ids = index_map(work, TopAbs_VERTEX)
 
     vertex_points = np.array([[p.X(), p.Y(), p.Z()] for p in (BRep_Tool.Pnt_s(v) for v in vertices)])
 
@@ -170,14 +172,14 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
             curves.append(None)
             edge_records.append(None)
             continue
-        curve, trsf = _as_bspline_curve(edge)
+        curve, trsf = bspline_curve(edge)
         curves.append((curve, trsf))
         edge_records.append(curve_to_record(curve, trsf))
 
     edge_faces: list[list[int]] = [[] for _ in edges]
     surfaces, face_records = [], []
     for k, face in enumerate(faces):
-        surface, trsf = _as_bspline_surface(face)
+        surface, trsf = bspline_surface(face)
         surfaces.append((surface, trsf))
         record = surface_to_record(surface, trsf)
         uses = []
