@@ -38,22 +38,27 @@ class FieldEstimator:
         self._k = min(neighbours, len(points))
         self._tree = cKDTree(points)
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        """Estimated displacements ``(m, 3)`` at points ``x`` ``(m, 3)``."""
+    def __call__(self, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
+        """Estimated displacements ``(m, 3)`` at points ``x`` ``(m, 3)``.
+
+        The local fits are solved all at once, ``chunk`` points at a time, by the pseudo-inverse of each
+        ``(k, 4)`` design matrix (batched SVD): foot points on a plane make that matrix rank-deficient, and the
+        pseudo-inverse then gives the minimum-norm gradient, i.e. none across the plane.
+        """
         x = np.atleast_2d(np.asarray(x, float))
         out = np.empty_like(x)
         if len(x) == 0:
             return out
-        _, idx = self._tree.query(x, k=self._k)
-        idx = idx.reshape(len(x), self._k)
-        for i, (xi, nb) in enumerate(zip(x, idx)):
-            p = self._points[nb] - xi
-            d = self._disp[nb]
-            if self._k < 4:
-                out[i] = d[0]
-                continue
-            scale = np.abs(p).max() or 1.0
-            design = np.column_stack([np.ones(len(nb)), p / scale])
-            coef, *_ = np.linalg.lstsq(design, d, rcond=1e-10)
-            out[i] = coef[0]
+        if self._k < 4:
+            _, idx = self._tree.query(x, k=1)
+            return self._disp[np.atleast_1d(idx)].reshape(x.shape)
+        for start in range(0, len(x), chunk):
+            xs = x[start:start + chunk]
+            _, idx = self._tree.query(xs, k=self._k)
+            offsets = self._points[idx] - xs[:, None, :]                      # (c, k, 3)
+            scale = np.abs(offsets).max(axis=(1, 2))
+            scale[scale == 0] = 1.0
+            design = np.concatenate([np.ones(idx.shape + (1,)), offsets / scale[:, None, None]], axis=2)
+            coef = np.linalg.pinv(design, rcond=1e-10) @ self._disp[idx]          # (c, 4, 3)
+            out[start:start + chunk] = coef[:, 0, :]
         return out

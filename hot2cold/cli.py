@@ -36,6 +36,10 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--report", type=Path, help="write the accuracy report as JSON here")
     m.add_argument("--field-units", choices=sorted(UNITS), default="mm",
                    help="length unit of the field file (default mm)")
+    m.add_argument("--field-name", metavar="NAME",
+                   help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
+    m.add_argument("--invert", action="store_true",
+                   help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
     m.add_argument("--node-distance", type=float, metavar="MM",
                    help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     m.add_argument("--edge-distance", type=float, metavar="MM",
@@ -97,7 +101,8 @@ def _morph(args) -> int:
     except ValueError as exc:
         raise InputError(str(exc)) from exc
     progress = None if args.quiet else _Progress(sys.stderr)
-    result = morph(args.hot, args.field, settings, units=args.field_units, progress=progress)
+    result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
+                   invert=args.invert, progress=progress)
     if not args.quiet:
         print(result.report.table())
     if args.report:

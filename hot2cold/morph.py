@@ -7,7 +7,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
@@ -18,6 +18,7 @@ from .edges import EdgeMorph, morph_edges, vertex_displacements
 from .errors import FieldError, MorphError
 from .faces import FaceMorph, morph_faces
 from .field import DisplacementField, as_field
+from .invert import invert_field
 from .kernel.check import check_solids
 from .kernel.project import Projector
 from .kernel.rebuild import rebuild
@@ -60,8 +61,8 @@ class MorphResult:
         write_step(self.cold.wrapped, path)
 
 
-def morph(hot, field, settings: Settings | None = None, *, units: str = "mm",
-          progress: Progress | None = None) -> MorphResult:
+def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", field_name: str | None = None,
+          invert: bool = False, progress: Progress | None = None) -> MorphResult:
     """Morph the hot part with an FE displacement field into the cold part.
 
     Parameters
@@ -71,6 +72,9 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm",
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
     settings : tolerances (default :class:`Settings()`).
     units : length unit of ``field`` when it is read or given as arrays ("mm" or "m").
+    field_name : name of the displacement point field in a VTK/VTU (or other meshio) file.
+    invert : the field goes cold to hot (given at the nodes of the hot mesh); it is inverted by fixed-point
+        iteration first (:mod:`hot2cold.invert`) and the iteration's residual is reported.
     progress : optional callback ``progress(stage, done, total)``.
 
     Raises
@@ -93,7 +97,11 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm",
         if progress is not None:
             progress(stage, done, total)
 
-    field = as_field(field, units)
+    field = as_field(field, units, field_name=field_name) if field_name else as_field(field, units)
+    inversion = None
+    if invert:
+        field, inversion = invert_field(field)
+        lap("invert")
     part = load_part(hot, settings)
     hot_checks = check_solids(part.kernel.hot)
     lap("load")
@@ -128,7 +136,7 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm",
     lap("report")
     report = build_report(part, cls, field, face_morphs, edge_morphs, errors, gaps, hot_checks, cold_checks,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-                          timings=timings)
+                          timings=timings, inversion=None if inversion is None else asdict(inversion))
     report_progress("report")
     result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
                          part=part, classification=cls, faces=face_morphs, edges=edge_morphs)
@@ -147,9 +155,23 @@ def check_result(result: MorphResult) -> None:
             raise MorphError(f"cold solid {s.index} has {s.faces} faces, the hot one {len(hot_faces)}")
 
 
+#: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user.
+_UNIT_HINTS = ((1e-3, "the field looks like metres: use --field-units m (units='m')"),
+               (1 / 25.4, "the field looks like inches: convert it to mm"),
+               (1e3, "the field is 1000 times larger than the part: is the part in metres or the field in µm?"))
+
+
 def _check_coverage(part: Part, cls: Classification, field: DisplacementField) -> None:
-    """Raise :class:`FieldError` when no node lies on the part, with a hint at the likely cause."""
-    if cls.used.any():
+    """Raise :class:`FieldError` when the field and the part clearly disagree: no node on the part, or most
+    nodes off the part with a field whose extent differs from the part's by a unit factor."""
+    extent = float(np.linalg.norm(np.ptp(field.points, axis=0))) if len(field) > 1 else 0.0
+    ratio = extent / part.diagonal
+    used = float(np.mean(cls.used))
+    hint = next((text for factor, text in _UNIT_HINTS if 0.5 * factor <= ratio <= 2.0 * factor), None)
+    if hint and used < 0.5:
+        raise FieldError(f"{field.source or 'the field'} spans {extent:.4g} mm but the part {part.diagonal:.4g} mm "
+                         f"and {100 * (1 - used):.0f} % of its nodes are off the part: {hint}")
+    if used > 0:
         return
     centre = part.vertices.mean(axis=0) if len(part.vertices) else np.zeros(3)
     spread = np.linalg.norm(field.points - centre, axis=1)

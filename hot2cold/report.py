@@ -92,6 +92,7 @@ class Report:
     edges: list[EdgeReport]
     solids: list[SolidReport]
     timings: dict[str, float] = field(default_factory=dict)
+    inversion: dict | None = None
 
     @property
     def nodes_used(self) -> int:
@@ -126,6 +127,9 @@ class Report:
             lines.append(f"solid {s.index}: {'valid' if s.valid else 'INVALID'}, "
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
+        if self.inversion:
+            lines.append(f"field inverted (cold to hot): {self.inversion['iterations']} fixed-point iterations, "
+                         f"residual {self.inversion['residual']:.2e} mm")
         lines.append(f"overall: Δmax {_num(self.delta_max)} mm, Δmean {_num(self.delta_mean)} mm, "
                      f"largest displacement {self.max_displacement:.4g} mm")
         return "\n".join(lines)
@@ -171,7 +175,7 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
 def build_report(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
                  edge_morphs: list[EdgeMorph], errors: np.ndarray, gaps: np.ndarray,
                  hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], hot_name: str = "",
-                 timings: dict[str, float] | None = None) -> Report:
+                 timings: dict[str, float] | None = None, inversion: dict | None = None) -> Report:
     """Assemble the :class:`Report` of a morph."""
     faces = []
     for fm in face_morphs:
@@ -200,4 +204,4 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
         delta_max=_stats(all_err)[0], delta_mean=_stats(all_err)[1],
         vertex_delta_max=_stats(vertex_err)[0],
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
-        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}))
+        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion)

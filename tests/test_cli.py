@@ -102,8 +102,8 @@ def test_bad_field_files(tmp_path, block_step, capsys, content, words):
 
 
 def test_no_node_near_the_part(tmp_path, block_step, block_nodes, capsys):
-    # a field in metres read as millimetres: every node sits near the origin, far from the faces
-    field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0 + 100.0, FIELD(block_nodes) / 1000.0)
+    # a field of another part: same size, 500 mm away
+    field = _write_field(tmp_path / "far.csv", block_nodes + 500.0, FIELD(block_nodes))
     out = tmp_path / "cold.step"
     _refused(capsys, ["morph", str(block_step), str(field), "-o", str(out)], 2, "no FE node", "units")
     assert not out.exists()
@@ -131,3 +131,26 @@ def test_console_script_runs_without_traceback(tmp_path, block_step):
     assert proc.returncode == 2
     assert proc.stderr.startswith("hot2cold: error:") and "Traceback" not in proc.stderr
     assert not (tmp_path / "c.step").exists()
+
+
+def test_inverted_field_gives_the_same_cold_part(tmp_path, block_step, block_nodes, capsys):
+    # the cold-to-hot field of an affine hot-to-cold map x -> A x + b is y -> A^-1 (y - b), taken at hot nodes
+    # FE output has volume nodes too (the inversion needs them for the displacement's normal derivative):
+    # a 2 mm grid over the block's box stands in for them
+    lo, hi = block_nodes.min(axis=0), block_nodes.max(axis=0)
+    grid = np.stack(np.meshgrid(*[np.arange(a, b + 1e-9, 2.0) for a, b in zip(lo, hi)], indexing="ij"), -1)
+    nodes = np.concatenate([block_nodes, grid.reshape(-1, 3)])
+    a, b = FIELD.matrix, FIELD.translation
+    cold_to_hot = np.linalg.solve(a, (nodes - b).T).T - nodes
+    field = _write_field(tmp_path / "c2h.csv", nodes, cold_to_hot)
+    out, report = tmp_path / "cold.step", tmp_path / "r.json"
+    assert main(["morph", str(block_step), str(field), "-o", str(out), "--report", str(report), "--invert"]) == 0
+    data = json.loads(report.read_text())
+    assert data["inversion"]["residual"] < 1e-9 and data["delta_max"] < 1e-6
+    assert "fixed-point iterations" in capsys.readouterr().out
+
+
+def test_field_in_metres_without_units_is_caught(tmp_path, block_step, block_nodes, capsys):
+    field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0, FIELD(block_nodes) / 1000.0)
+    _refused(capsys, ["morph", str(block_step), str(field), "-o", str(tmp_path / "c.step")], 2,
+             "metres", "--field-units m")
