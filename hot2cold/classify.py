@@ -92,6 +92,25 @@ def _length(curve) -> float:
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
 
+def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: float, margin: float,
+                k: int = 24) -> dict[int, np.ndarray]:
+    """Candidate owners of ``points (n, 3)``: for each owner index, the points that may lie within ``reach``
+    of it.
+
+    ``tree`` holds sample points of every owner (``owner (m,)``), at most ``margin`` apart on each owner.  A
+    point whose nearest sample is ``d0`` away cannot be nearer than ``d0 - margin`` to an owner whose
+    samples are all farther than ``d0 + margin``; the ``k`` nearest samples name the owners within that
+    radius (samples on an edge belong to both of its faces, so both are among them near the edge).
+    """
+    dist, idx = tree.query(points, k=min(k, tree.n))
+    dist, idx = dist.reshape(len(points), -1), idx.reshape(len(points), -1)
+    keep = (dist <= dist[:, :1] + margin) & (dist[:, :1] <= reach + margin)
+    node = np.repeat(np.arange(len(points)), dist.shape[1])[keep.ravel()]
+    pairs = np.unique(np.column_stack([owner[idx.ravel()[keep.ravel()]], node]), axis=0)
+    split = np.flatnonzero(np.diff(pairs[:, 0])) + 1
+    return {int(group[0, 0]): group[:, 1] for group in np.split(pairs, split) if len(group)}
+
+
 def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
                    projector: Projector) -> Classification:
     """Classify the nodes of ``field`` on ``part`` (see the module docstring)."""
@@ -107,15 +126,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
 
     spacing = part.diagonal / 150.0
     cloud, cloud_face = _face_cloud(part, projector, spacing)
-    tree = cKDTree(cloud)
-    near, _ = tree.query(points)
-    # A face point within near + 2 * spacing of a node may belong to a face nearer than the nearest sample.
-    radius = near + 2.0 * spacing
-    reach = near <= node_distance + 2.0 * spacing
-    candidates: dict[int, list[int]] = {}
-    for i in np.flatnonzero(reach):
-        for k in np.unique(cloud_face[tree.query_ball_point(points[i], radius[i])]):
-            candidates.setdefault(int(k), []).append(int(i))
+    candidates = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * spacing)
 
     best = np.full(n, np.inf)
     for k, nodes in candidates.items():
@@ -169,10 +180,11 @@ def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, 
     near, _ = tree.query(points[used])
     close = near <= edge_distance + h
     per_edge: dict[int, list[int]] = {}
-    for i in used[close]:
-        for e in np.unique(sample_edge[tree.query_ball_point(points[i], edge_distance + h)]):
-            if owner[i] in part.edges[e].faces:
-                per_edge.setdefault(int(e), []).append(int(i))
+    for e, nodes in _candidates(tree, sample_edge, points[used[close]], edge_distance, h).items():
+        nodes = used[close][nodes]
+        nodes = nodes[np.isin(owner[nodes], part.edges[e].faces)]
+        if len(nodes):
+            per_edge[e] = list(nodes)
     best = np.full(len(points), np.inf)
     for e, nodes in per_edge.items():
         nodes = np.asarray(nodes)
