@@ -76,7 +76,8 @@ def _sparse_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
 
 
 def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
-               estimator: FieldEstimator | None, epsilon: float, index: int = -1) -> EdgeMorph:
+               estimator: FieldEstimator | None, epsilon: float, index: int = -1,
+               artificial_weight: float = 1.0) -> EdgeMorph:
     """Morph one clamped curve.
 
     Parameters
@@ -86,21 +87,24 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     end_disp : (2, 3) displacements of the start and end vertex (eq. 10).
     estimator : gives artificial nodes in knot spans with too few nodes (None: none are added).
     epsilon : machine-precision factor of the SVD cut-off (eq. 20).
+    artificial_weight : weight of the artificial nodes' rows against the FE nodes' (1).
     """
     n = curve.n_poles
     delta = np.zeros((n, 3))
     delta[0], delta[-1] = end_disp
     artificial = 0
+    weight = np.ones(len(t))
     if estimator is not None and n > 2:
         t_art = _sparse_spans(curve, t)
         if len(t_art):
             artificial = len(t_art)
             t = np.concatenate([t, t_art])
             disp = np.concatenate([disp, estimator(evaluate_curve(curve, t_art))])
+            weight = np.concatenate([weight, np.full(len(t_art), artificial_weight)])
     rank, condition = 0, float("nan")
     if n > 2 and len(t):
-        basis = curve_basis(curve, t).toarray()
-        rhs = disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
+        basis = weight[:, None] * curve_basis(curve, t).toarray()
+        rhs = weight[:, None] * disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
         sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon)         # eq. (13)-(20)
         delta[1:-1] = sol.x
         rank, condition = sol.rank, sol.condition
@@ -123,6 +127,6 @@ def morph_edges(part: Part, cls: Classification, field: DisplacementField, verte
         nodes = cls.nodes_of(EDGE, edge.index)
         out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
                               vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon,
-                              edge.index))
+                              edge.index, settings.artificial_weight))
     log.info("morphed %d edges", len(out))
     return out

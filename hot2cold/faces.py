@@ -11,14 +11,17 @@ rounding in a B-spline-converted part; a zero field leaves every pole bit for bi
 over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20).
 Edges that are not a whole side (trimmed faces, split sides) add rows that hold the surface to the morphed
 edge at points along the edge's curve on the face, and knot-span patches with too few data get artificial nodes (eq. 39) so that
-no pole is left undetermined.
+no pole is left undetermined.  Artificial rows carry the weight ``Settings.artificial_weight`` (< 1): they
+settle what the FE nodes leave open and yield where FE nodes speak.
 """
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
+from scipy.sparse import diags_array
 
 from .artificial import FieldEstimator
 from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
@@ -45,7 +48,8 @@ class FaceMorph:
     surface : BSplineSurface, the morphed surface (same degrees, knots and weights).
     nodes : int, FE nodes in the face interior.
     edge_rows : int, rows that hold the surface to edges that are not whole sides.
-    artificial : int, artificial nodes added in knot-span patches with too few data.
+    artificial : int, artificial nodes added in knot-span patches with too few data and over the
+        trimmed-away part of the surface.
     tied_sides : tuple of str, sides whose poles moved with a morphed edge ("u0", "u1", "v0", "v1").
     unknowns : int, poles solved for.
     rank : int, rank kept by the truncated SVD.
@@ -125,13 +129,16 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
     return side, morphed - poles
 
 
-def _sparse_patches(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
-    """Parameters ``(m, 2)`` of artificial nodes for the knot-span patches ``[U_r, U_r+1) x [V_s, V_s+1)``
-    that hold fewer than ``(p + 1)(q + 1)`` parameter pairs of ``uv``.
+def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
+                           trimmed_away: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+    """Parameters ``(m, 2)`` of the artificial nodes of a face (METHOD step 6, eq. 39).
 
-    The paper puts one artificial node at the centre of an empty patch (eq. 39); one node cannot fix the
-    ``(p + 1)(q + 1)`` coefficients of a patch's polynomial piece, so such a patch (empty, trimmed away, or
-    nearly empty) gets a ``(p + 1) x (q + 1)`` grid of them.
+    Every knot-span patch ``[U_r, U_r+1) x [V_s, V_s+1)`` carries a ``(p + 1) x (q + 1)`` grid of candidate
+    points.  A patch holding fewer than ``(p + 1)(q + 1)`` of the data parameters ``uv`` takes all of its
+    grid: the paper puts one node at the centre of an empty patch, but one node cannot fix the
+    ``(p + 1)(q + 1)`` coefficients of a patch's polynomial piece.  Elsewhere the grid points that
+    ``trimmed_away(uv) -> (m,) bool`` puts outside the face's trimmed domain are taken, so the surface
+    follows the field's continuation there instead of wandering.
     """
     p, q = surface.u_degree, surface.v_degree
     nu, nv = surface.shape
@@ -141,19 +148,26 @@ def _sparse_patches(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
         counts = np.histogram2d(uv[:, 0], uv[:, 1], bins=[ub, vb])[0]
     else:
         counts = np.zeros((len(ub) - 1, len(vb) - 1))
-    r, s = np.nonzero(counts < (p + 1) * (q + 1))
-    fu = (np.arange(p + 1) + 0.5) / (p + 1)
-    fv = (np.arange(q + 1) + 0.5) / (q + 1)
-    gu, gv = np.meshgrid(fu, fv, indexing="ij")
-    u = ub[r, None] + gu.ravel() * (ub[r + 1] - ub[r])[:, None]
+    r, s = np.meshgrid(np.arange(len(ub) - 1), np.arange(len(vb) - 1), indexing="ij")
+    r, s = r.ravel(), s.ravel()
+    gu, gv = np.meshgrid((np.arange(p + 1) + 0.5) / (p + 1), (np.arange(q + 1) + 0.5) / (q + 1), indexing="ij")
+    u = ub[r, None] + gu.ravel() * (ub[r + 1] - ub[r])[:, None]             # (patches, (p+1)(q+1))
     v = vb[s, None] + gv.ravel() * (vb[s + 1] - vb[s])[:, None]
-    return np.column_stack([u.ravel(), v.ravel()])
+    sparse = np.repeat(counts[r, s] < (p + 1) * (q + 1), u.shape[1])
+    grid = np.column_stack([u.ravel(), v.ravel()])
+    take = sparse.copy()
+    if trimmed_away is not None and (~sparse).any():
+        take[~sparse] = trimmed_away(grid[~sparse])
+    return grid[take]
 
 
 def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
                edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-               settings: Settings) -> FaceMorph:
-    """Morph one face with its boundary taken from the morphed edges."""
+               settings: Settings, trimmed_away: Callable[[np.ndarray], np.ndarray] | None = None) -> FaceMorph:
+    """Morph one face with its boundary taken from the morphed edges.
+
+    ``trimmed_away(uv (m, 2)) -> (m,) bool`` tells which parameters lie outside the face's trimmed domain.
+    """
     surface = face.surface
     nu, nv = surface.shape
     tol = 1e-7 * part.diagonal
@@ -170,14 +184,15 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
             fixed[index] = True
             tied.append(side)
             continue
-        hot = evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1])
-        curve = edge_morphs[use.edge].curve
-        if curve is None:
-            cold = hot + vertex_disp[part.edges[use.edge].vertices[0]]
+        # The surface at the edge's pcurve moves as the edge does.  (Not onto the cold edge: a trimmed face
+        # of a boolean may sit up to its edge tolerance off its edge, and that hot gap is kept, not closed.)
+        edge = part.edges[use.edge]
+        if edge.degenerate:
+            moved = np.broadcast_to(vertex_disp[edge.vertices[0]], (len(use.t), 3))
         else:
-            cold = evaluate_curve(curve, use.t)
+            moved = evaluate_curve(edge_morphs[use.edge].curve, use.t) - evaluate_curve(edge.curve, use.t)
         uv_rows.append(use.uv)
-        target_rows.append(cold - hot)
+        target_rows.append(moved)
     edge_rows = sum(len(r) for r in uv_rows)
 
     nodes = cls.nodes_of(FACE, face.index)
@@ -186,17 +201,19 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     uv = np.concatenate(uv_rows)
     target = np.concatenate(target_rows)
 
-    centres = _sparse_patches(surface, uv)
+    centres = _artificial_parameters(surface, uv, trimmed_away)
+    weight = np.ones(len(uv))
     if len(centres):
         uv = np.concatenate([uv, centres])
         target = np.concatenate([target, estimator(evaluate_surface(surface, centres[:, 0], centres[:, 1]))])
+        weight = np.concatenate([weight, np.full(len(centres), settings.artificial_weight)])
 
     free = ~fixed.ravel()
     rank, condition = 0, float("nan")
     if free.any():
-        basis = surface_basis(surface, uv[:, 0], uv[:, 1])
+        basis = diags_array(weight) @ surface_basis(surface, uv[:, 0], uv[:, 1])
         flat = delta.reshape(-1, 3)
-        rhs = target - basis[:, ~free] @ flat[~free] if (~free).any() else target   # eq. (38)
+        rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
         sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon)                  # eq. (19)-(20)
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
@@ -206,11 +223,17 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
 
 def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_morphs: list[EdgeMorph],
                 vertex_disp: np.ndarray, estimator: FieldEstimator, settings: Settings,
+                trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
                 progress=None) -> list[FaceMorph]:
-    """Morph every face of ``part``; ``progress(done, total)`` is called after each face if given."""
+    """Morph every face of ``part``.
+
+    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
+    domain; ``progress(done, total)`` is called after each face if given.
+    """
     out = []
     for face in part.faces:
-        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings))
+        outside = None if trimmed_away is None else (lambda uv, k=face.index: trimmed_away(k, uv))
+        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, outside))
         if progress is not None:
             progress(len(out), len(part.faces))
     log.info("morphed %d faces", len(out))

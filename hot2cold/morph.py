@@ -20,7 +20,7 @@ from .faces import FaceMorph, morph_faces
 from .field import DisplacementField, as_field
 from .invert import invert_field
 from .kernel.check import check_solids
-from .kernel.project import Projector
+from .kernel.project import OUTSIDE, Projector
 from .kernel.rebuild import rebuild
 from .kernel.sew import sew
 from .kernel.shapes import to_cadquery
@@ -121,6 +121,7 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     report_progress("edges")
 
     face_morphs = morph_faces(part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                              trimmed_away=lambda k, uv: projector.classify(k, uv) == OUTSIDE,
                               progress=lambda done, total: report_progress("faces", done, total))
     lap("faces")
 

@@ -36,6 +36,10 @@ class Settings:
     vertex_neighbours : int
         How many nearest foot points estimate a vertex displacement by a local least-squares fit when no
         node sits on the vertex.
+    artificial_weight : float
+        Weight of an artificial node's row in a fit, against 1 for an FE node: artificial nodes settle the
+        poles the FE nodes leave open (empty or thin knot spans, trimmed-away parts) without pulling the
+        surface away from the FE nodes where both are present.
     edge_samples_per_span : int
         Points per knot span at which a morphed edge that is not an iso-curve of a face constrains that
         face's fit (keeps trimmed faces on their edges).
@@ -48,13 +52,14 @@ class Settings:
     svd_epsilon: float = FLT_EPSILON
     vertex_neighbours: int = 20
     edge_samples_per_span: int = 4
+    artificial_weight: float = 0.1
 
     def __post_init__(self):
         for name in ("node_distance", "edge_distance"):
             value = getattr(self, name)
             if value is not None and not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive length in mm, got {value!r}")
-        for name in ("node_distance_rel", "edge_distance_rel", "svd_epsilon"):
+        for name in ("node_distance_rel", "edge_distance_rel", "svd_epsilon", "artificial_weight"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value!r}")

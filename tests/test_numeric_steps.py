@@ -7,7 +7,7 @@ import pytest
 from hot2cold.artificial import FieldEstimator
 from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_curve
 from hot2cold.edges import morph_edge
-from hot2cold.faces import _side_of, _sparse_patches
+from hot2cold.faces import _artificial_parameters, _side_of
 from hot2cold.model import EdgeUse
 
 RNG = np.random.default_rng(11)
@@ -87,7 +87,15 @@ def test_sparse_patches_get_a_grid_of_artificial_nodes():
     surface = _surface()                                  # 2 x 3 patches of degrees (3, 2)
     full = np.column_stack([np.repeat(np.linspace(0.01, 0.49, 4), 3), np.tile(np.linspace(0.01, 0.29, 3), 4)])
     uv = np.concatenate([full, [[0.75, 0.1], [0.25, 0.45]]])   # patch (0, 0) full, two with one node
-    nodes = _sparse_patches(surface, uv)
+    nodes = _artificial_parameters(surface, uv)
     assert len(nodes) == 5 * 4 * 3                      # five patches below 12 data, a 4 x 3 grid each
     counts = np.histogram2d(nodes[:, 0], nodes[:, 1], bins=[[0, 0.5, 1], [0, 0.3, 0.6, 1]])[0]
     assert counts.tolist() == [[0, 12, 12], [12, 12, 12]]
+
+
+def test_trimmed_away_grid_points_become_artificial_nodes():
+    surface = _surface()
+    uv = np.column_stack([np.repeat(np.linspace(0.01, 0.99, 20), 20), np.tile(np.linspace(0.01, 0.99, 20), 20)])
+    assert len(_artificial_parameters(surface, uv)) == 0            # every patch is full
+    nodes = _artificial_parameters(surface, uv, trimmed_away=lambda p: p[:, 0] > 0.5)
+    assert len(nodes) == 3 * 4 * 3 and np.all(nodes[:, 0] > 0.5)     # the grids of the three patches u > 0.5

@@ -39,9 +39,11 @@ class Projector:
         proj = self._surf.get(k)
         if proj is None:
             face = self._faces[k]
+            surface = BRep_Tool.Surface_s(face)
             u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+            su0, su1, sv0, sv1 = surface.Bounds()       # a trimmed face's box may overshoot its surface
             proj = GeomAPI_ProjectPointOnSurf()
-            proj.Init(BRep_Tool.Surface_s(face), u0, u1, v0, v1, Extrema_ExtAlgo_Tree)
+            proj.Init(surface, max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1), Extrema_ExtAlgo_Tree)
             self._surf[k] = proj
         return proj
 

@@ -182,6 +182,7 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
         surface, trsf = bspline_surface(face)
         surfaces.append((surface, trsf))
         record = surface_to_record(surface, trsf)
+        u_lo, u_hi, v_lo, v_hi = record.domain
         uses = []
         explorer = TopExp_Explorer(face, TopAbs_EDGE)
         while explorer.More():
@@ -197,10 +198,14 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
             pcurve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
             if pcurve is None:
                 raise KernelError(f"edge {e} of face {k} has no curve on the face")
+            # pcurves of boolean results may overshoot the surface's domain by a hair: clip to it
             uv = np.array([[p.X(), p.Y()] for p in (pcurve.Value(float(x)) for x in t)])
+            uv = np.clip(uv, [u_lo, v_lo], [u_hi, v_hi])
             uses.append(EdgeUse(edge=e, t=t, uv=uv))
             explorer.Next()
-        face_records.append((record, np.array(BRepTools.UVBounds_s(face)), tuple(uses)))
+        box = np.array(BRepTools.UVBounds_s(face))
+        box = np.clip(box, [u_lo, u_lo, v_lo, v_lo], [u_hi, u_hi, v_hi, v_hi])
+        face_records.append((record, box, tuple(uses)))
 
     solid_of_face = np.full(len(faces), -1)
     solid_faces = []
