@@ -16,13 +16,32 @@ byte-order mark) are tolerated.  A header written as a comment (``# x,y,z,dx,dy,
 header=...)`` writes it) is used when no plain header line precedes the numbers.
 
 *NumPy* ``.npz`` (recognised by its content, whatever the file name): arrays ``points`` (N, 3) and
-``displacements`` (N, 3), optionally ``node_ids`` (N,).
+``displacements`` (N, 3) (or the array named by ``field_name``), optionally ``node_ids`` (N,).  This is what
+:func:`hot2cold.fe.calculix.hot_to_cold_field` writes.
+
+*CalculiX results* ``.frd`` (ASCII; recognised by the extension or by its first record ``    1C``): the
+node block and the last ``DISP`` result block (or the block chosen by ``step``, counting ``DISP`` blocks
+from 0; or the dataset named by ``field_name``), read by fixed columns (:mod:`hot2cold.fe.frd`).  The
+``.frd`` of a hot2cold hot-to-cold deck (:mod:`hot2cold.fe.calculix`, recognised by its heading) gives its
+hot -> cold field: for a rotating part the last ``DISP`` block minus the first.
+``node_ids`` are the CalculiX node numbers.  The ``.frd`` holds coordinates to 6 significant digits only:
+pass ``points_from=`` (the :class:`~hot2cold.fe.mesh.TetMesh` the run was made on, or a field or ``.npz``
+/ text file with node ids, in the same length unit as the ``.frd``) to take the node positions from there,
+matched by node number; positions that disagree with the ``.frd`` beyond its rounding raise an error.
+
+*Mesh files read by meshio* (``.vtu``, ``.vtk``, ``.xdmf``/``.xmf``, ``.msh``, ``.med``, ``.h5m`` and
+meshio's other formats; VTK, VTU and gmsh files are also recognised by content): the mesh points and a
+point field named ``U``, ``displacement``, ``displacements`` or ``DISP`` (any letter case, first match in
+that order), or the one named by ``field_name``; its shape must be (N, 3).  Needs meshio (the ``fe``
+extra).  ``.dat`` files stay text tables.
 
 Every problem raises :class:`hot2cold.errors.FieldError` with a one-line message that says what is wrong
 and what to do.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import itertools
 import logging
 import os
@@ -33,7 +52,8 @@ import numpy as np
 
 from hot2cold.errors import FieldError
 
-__all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "read_field", "as_field"]
+__all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
+           "as_field", "match_points"]
 
 log = logging.getLogger(__name__)
 
@@ -155,22 +175,35 @@ class DisplacementField:
 # --------------------------------------------------------------------------------------------------------
 # Public entry points
 # --------------------------------------------------------------------------------------------------------
-def read_field(path, units: str = "mm") -> DisplacementField:
-    """Read a displacement field from a text table or an ``.npz`` file, scaled to millimetres.
+def read_field(path, units: str = "mm", field_name: str | None = None, *, points_from=None,
+               step: int | None = None) -> DisplacementField:
+    """Read a displacement field from a text table, ``.npz``, CalculiX ``.frd`` or mesh file, in millimetres.
 
     Parameters
     ----------
     path : str or os.PathLike
-        The field file (see the module documentation for the formats).
+        The field file (see the module documentation for the formats; dispatched by extension, then content).
     units : str
         ``"mm"`` (default) or ``"m"``: the length unit of the file; the result is in mm.
+    field_name : str or None
+        Which displacement data to take: the point field of a mesh file, the dataset of an ``.frd``
+        (default ``DISP``), the array of an ``.npz`` (default ``displacements``).  Not for text tables.
+    points_from : TetMesh, DisplacementField, path or None
+        ``.frd`` only: where to take the node positions from, matched by node number (see the module
+        documentation).  ``None``: the ``.frd``'s own, rounded coordinates.
+    step : int or None
+        ``.frd`` only: which displacement block, counting from 0 in file order (negative from the end);
+        ``None``: the last.
 
     Raises
     ------
     FieldError
-        The file is missing or unreadable, or its content is malformed, empty or not finite.
+        The file is missing or unreadable, or its content is malformed, truncated, empty or not finite, or
+        lacks the displacement data.
     """
     factor = _unit_factor(units)
+    if field_name is not None and (not isinstance(field_name, str) or not field_name.strip()):
+        raise FieldError(f"field_name must be a non-empty string or None, got {field_name!r}")
     try:
         fspath = os.fspath(path)
     except TypeError:
@@ -179,24 +212,35 @@ def read_field(path, units: str = "mm") -> DisplacementField:
         fspath = os.fsdecode(fspath)
     fspath = os.path.expanduser(fspath)
     raw = _read_bytes(fspath)
-    if raw.startswith(_NPZ_MAGIC):
-        field = _parse_npz(fspath)
-        kind = "npz"
+    kind = _kind(fspath, raw)
+    if kind != "frd" and (points_from is not None or step is not None):
+        raise FieldError(
+            f"points_from and step apply to CalculiX .frd files only; {fspath} is read as {kind}")
+    if kind == "npz":
+        field = _parse_npz(fspath, field_name)
+    elif kind == "frd":
+        field = _parse_frd(raw, fspath, field_name, step, points_from)
+    elif kind.startswith("meshio"):
+        field = _parse_meshio(fspath, kind.partition(":")[2] or None, field_name)
     else:
+        if field_name is not None:
+            raise FieldError(
+                f"field_name applies to .frd, .npz and mesh files; the text table {fspath} needs the columns "
+                f"{','.join(REQUIRED_COLUMNS)}")
         field = _parse_text(raw, fspath)
-        kind = "text"
     if factor != 1.0:
         field = field.scaled(factor)
-    log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind, units.strip().lower())
+    log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind.partition(":")[0],
+             units.strip().lower())
     return field
 
 
-def as_field(field, units: str = "mm") -> DisplacementField:
+def as_field(field, units: str = "mm", field_name: str | None = None) -> DisplacementField:
     """Turn what a user passed into a :class:`DisplacementField` in millimetres.
 
     Accepts a :class:`DisplacementField` (returned as it is; it is already in mm, so ``units`` must be
-    ``"mm"``), a path (``str`` or ``os.PathLike``; see :func:`read_field`), or a pair
-    ``(points, displacements)`` of (N, 3) array-likes in ``units``.
+    ``"mm"``), a path (``str`` or ``os.PathLike``; see :func:`read_field`, which gets ``field_name``), or a
+    pair ``(points, displacements)`` of (N, 3) array-likes in ``units``.
     """
     factor = _unit_factor(units)
     if isinstance(field, DisplacementField):
@@ -206,7 +250,7 @@ def as_field(field, units: str = "mm") -> DisplacementField:
                 f"use field.scaled(...) or pass units='mm'")
         return field
     if isinstance(field, (str, bytes, os.PathLike)):
-        return read_field(field, units)
+        return read_field(field, units, field_name)
     if isinstance(field, (tuple, list)) and len(field) == 2:
         points, displacements = field
         result = DisplacementField(points, displacements, source="arrays")
@@ -245,18 +289,19 @@ def _read_bytes(path: str) -> bytes:
         raise FieldError(f"cannot read field file {path}: {_one_line(exc)}") from None
 
 
-def _parse_npz(path: str) -> DisplacementField:
+def _parse_npz(path: str, field_name: str | None = None) -> DisplacementField:
+    name = "displacements" if field_name is None else field_name
     try:
         with np.load(path, allow_pickle=False) as npz:
             keys = list(npz.files)
-            missing = [k for k in ("points", "displacements") if k not in keys]
+            missing = [k for k in ("points", name) if k not in keys]
             if missing:
                 raise FieldError(
                     f"field file {path} lacks array(s) {', '.join(missing)} (found: "
                     f"{', '.join(keys) or 'none'}); "
-                    f"save it with np.savez(path, points=..., displacements=...)")
+                    f"save it with np.savez(path, points=..., {name}=...)")
             points = npz["points"]
-            displacements = npz["displacements"]
+            displacements = npz[name]
             node_ids = npz["node_ids"] if "node_ids" in keys else None
     except FieldError:
         raise
@@ -265,6 +310,188 @@ def _parse_npz(path: str) -> DisplacementField:
             f"cannot read field file {path} as .npz: {_one_line(exc)}; "
             f"save it with np.savez(path, points=..., displacements=...)") from None
     return DisplacementField(points, displacements, node_ids, source=path)
+
+
+#: Extensions read by meshio (besides those meshio itself knows, minus the ones kept as text tables).
+_TEXT_EXTENSIONS = (".csv", ".txt", ".dat", ".tsv")
+_MESHIO_EXTENSIONS = (".vtu", ".vtk", ".vtp", ".xdmf", ".xmf", ".msh", ".med", ".h5m", ".cgns", ".e", ".exo",
+                      ".ex2", ".inp", ".bdf", ".nas", ".fem", ".mesh", ".meshb", ".su2", ".ugrid", ".avs",
+                      ".mdpa", ".ply", ".obj", ".off", ".tec", ".vol", ".xml", ".f3grid", ".hmf", ".post",
+                      ".dato")
+
+#: Point-field names taken as displacements in mesh files (case-insensitive, in this order of preference).
+DISPLACEMENT_NAMES = ("u", "displacement", "displacements", "disp")
+
+
+def _kind(path: str, raw: bytes) -> str:
+    """How to read the file: ``npz``, ``frd``, ``meshio[:format]`` or ``text``."""
+    if raw.startswith(_NPZ_MAGIC):
+        return "npz"
+    name = path.lower()
+    ext = os.path.splitext(name)[1]
+    if ext == ".frd":
+        return "frd"
+    if ext in _TEXT_EXTENSIONS:
+        return "text"
+    head = raw[:512].lstrip(b"\xef\xbb\xbf")
+    if head.startswith(b"    1C"):
+        return "frd"
+    if ext in _MESHIO_EXTENSIONS or name.endswith((".vol.gz", ".post.gz", ".dato.gz")):
+        return "meshio"
+    if head.startswith(b"# vtk DataFile"):
+        return "meshio:vtk"
+    if head.lstrip().startswith(b"<?xml") or head.lstrip().startswith(b"<VTKFile"):
+        if b"<VTKFile" in head and b"UnstructuredGrid" in head:
+            return "meshio:vtu"
+        if b"<Xdmf" in head:
+            return "meshio:xdmf"
+    if head.startswith(b"$MeshFormat"):
+        return "meshio:gmsh"
+    return "text"
+
+
+def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from) -> DisplacementField:
+    from .fe.frd import FrdFile
+
+    frd = FrdFile(raw.decode("latin-1"), path)
+    if field_name is None and step is None and frd.is_hot_to_cold():
+        result = frd.hot_to_cold()
+        if result.count == 2:
+            log.info("%s: a hot2cold hot-to-cold run of a rotating part: displacement = DISP of step %d "
+                     "minus DISP of the first step", path, result.step)
+    else:
+        result = frd.result("DISP" if field_name is None else field_name, step)
+    points = result.points
+    if points_from is not None:
+        points = match_points(points_from, result.node_ids, result.points, path)
+    return DisplacementField(points, result.values[:, :3], result.node_ids, source=path)
+
+
+def match_points(source, ids: np.ndarray, rounded: np.ndarray, path: str = "the results") -> np.ndarray:
+    """Full-precision positions ``(N, 3)`` of the nodes ``ids (N,)`` of an ``.frd`` from ``source``.
+
+    ``source`` is a :class:`~hot2cold.fe.mesh.TetMesh` (anything with ``nodes`` and ``node_tags``), a
+    :class:`DisplacementField` with node ids, or a field file with node ids.  The positions must agree
+    with the ``.frd``'s 6-digit ``rounded`` ones ``(N, 3)`` to within that rounding, else FieldError.
+    """
+    if hasattr(source, "nodes") and hasattr(source, "node_tags"):  # a TetMesh
+        src_ids, src_pts, what = np.asarray(source.node_tags), np.asarray(source.nodes), "the mesh"
+    else:
+        if isinstance(source, (str, bytes, os.PathLike)):
+            source = read_field(source)
+        if not isinstance(source, DisplacementField):
+            raise FieldError(
+                f"points_from must be a TetMesh, a DisplacementField with node ids or a field file, "
+                f"got {type(source).__name__}")
+        if source.node_ids is None:
+            raise FieldError(
+                f"points_from ({source.source or 'a field'}) has no node ids to match the nodes of {path} by")
+        src_ids, src_pts, what = source.node_ids, source.points, source.source or "points_from"
+    src_ids = np.asarray(src_ids, dtype=np.int64)
+    src_pts = np.asarray(src_pts, dtype=np.float64)
+    if src_pts.ndim != 2 or src_pts.shape[1] != 3 or src_ids.shape != (len(src_pts),):
+        raise FieldError(f"points_from ({what}) must hold (N, 3) positions and (N,) node ids")
+    order = np.argsort(src_ids, kind="stable")
+    sorted_ids = src_ids[order]
+    pos = np.searchsorted(sorted_ids, ids)
+    pos = np.minimum(pos, max(len(sorted_ids) - 1, 0))
+    missing = (sorted_ids[pos] != ids) if len(sorted_ids) else np.ones(len(ids), bool)
+    if missing.any():
+        raise FieldError(
+            f"{int(missing.sum())} node(s) of {path} (first: node {int(ids[missing][0])}) are not in points_from "
+            f"({what}); pass the mesh the results were computed on")
+    points = src_pts[order[pos]]
+    # The .frd rounds to 6 significant digits (E12.5): half a unit of the 6th digit, and some slack.
+    tol = 1e-5 * np.maximum(np.abs(rounded), np.abs(rounded).max() * 1e-6) + 1e-12
+    off = np.abs(points - rounded) > tol
+    if off.any():
+        k = int(np.flatnonzero(off.any(axis=1))[0])
+        raise FieldError(
+            f"points_from ({what}) does not match {path}: node {int(ids[k])} is at "
+            f"{tuple(float(f'{v:.6g}') for v in points[k])} there but at "
+            f"{tuple(float(v) for v in rounded[k])} in the results ({int(off.any(axis=1).sum())} node(s) differ); "
+            f"pass the mesh the results were computed on, in the same length unit")
+    return points
+
+
+def _parse_meshio(path: str, file_format: str | None, field_name: str | None) -> DisplacementField:
+    try:
+        import meshio
+    except ImportError:
+        raise FieldError(
+            f"reading {path} needs meshio: pip install 'hot2cold[fe]' (or convert the field to CSV or .npz)"
+        ) from None
+    mesh = _meshio_read(meshio, path, file_format)
+    data = dict(mesh.point_data)
+    found = ", ".join(f"{k!r} {np.shape(v)}" for k, v in data.items()) or "none"
+    if field_name is not None:
+        key = field_name if field_name in data else None
+        if key is None:
+            folded = [k for k in data if k.lower() == field_name.lower()]
+            key = folded[0] if len(folded) == 1 else None
+        if key is None:
+            raise FieldError(
+                f"mesh file {path} has no point field {field_name!r} (point fields: {found})"
+                + _cell_hint(mesh, field_name))
+    else:
+        key = next((k for name in DISPLACEMENT_NAMES for k in data if k.lower() == name), None)
+        if key is None:
+            raise FieldError(
+                f"mesh file {path} has no displacement point field named U, displacement, displacements or "
+                f"DISP (point fields: {found}); name the field with field_name=...")
+    points = np.asarray(mesh.points, dtype=np.float64)
+    values = np.asarray(data[key])
+    if points.ndim == 2 and points.shape[1] == 2:  # a 2D mesh: z = 0
+        points = np.column_stack([points, np.zeros(len(points))])
+        if values.ndim == 2 and values.shape[1] == 2:
+            values = np.column_stack([values, np.zeros(len(values))])
+    if values.ndim != 2 or values.shape != (len(points), 3):
+        raise FieldError(
+            f"mesh file {path}: point field {key!r} has shape {values.shape}, but a displacement needs one "
+            f"(x, y, z) vector per point: shape ({len(points)}, 3)")
+    if values.dtype.kind not in "iuf":
+        raise FieldError(f"mesh file {path}: point field {key!r} holds {values.dtype} values, not numbers")
+    return DisplacementField(points, values, None, source=path)
+
+
+def _meshio_read(meshio, path: str, file_format: str | None):
+    """``meshio`` reading ``path``, quietly.
+
+    ``meshio.read`` prints its errors and calls ``sys.exit`` when no reader succeeds; here each candidate
+    format's reader is called directly (``meshio._helpers.reader_map``, falling back to ``meshio.read``),
+    with stdout and stderr captured (logged at debug level), and failures become one FieldError.
+    """
+    if file_format:
+        formats = [file_format]
+    else:
+        name = os.path.basename(path).lower()
+        formats = next((v for k, v in sorted(meshio.extension_to_filetypes.items(), key=lambda kv: -len(kv[0]))
+                        if name.endswith(k)), [])
+    if not formats:
+        raise FieldError(f"cannot tell the mesh format of {path} from its name; use a .vtu, .vtk, .xdmf or .msh "
+                         f"file")
+    readers = getattr(getattr(meshio, "_helpers", None), "reader_map", {})
+    problems = []
+    sink = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            for fmt in formats:
+                try:
+                    reader = readers.get(fmt)
+                    return reader(path) if reader is not None else meshio.read(path, file_format=fmt)
+                except SystemExit:
+                    problems.append(f"{fmt}: unreadable")
+                except Exception as exc:  # meshio raises ReadError, KeyError, ValueError, ... on bad files
+                    problems.append(f"{fmt}: {_one_line(exc)}")
+    finally:
+        if sink.getvalue().strip():
+            log.debug("meshio on %s: %s", path, " ".join(sink.getvalue().split()))
+    raise FieldError(f"cannot read mesh file {path} with meshio ({'; '.join(problems)})")
+
+
+def _cell_hint(mesh, name: str) -> str:
+    cells = [k for k in getattr(mesh, "cell_data", {}) if k.lower() == name.lower()]
+    return f"; {cells[0]!r} is cell data, hot2cold needs point (nodal) data" if cells else ""
 
 
 def _decode(raw: bytes, path: str) -> str:
