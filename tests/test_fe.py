@@ -6,6 +6,7 @@ the PATH.
 """
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -311,6 +312,10 @@ def test_hot_to_cold_field_pipeline(parts, tmp_path):
     surface = mesh.boundary_nodes()
     np.testing.assert_array_equal(field.points, mesh.nodes[surface])  # mesh positions, not the .frd's
     np.testing.assert_array_equal(field.node_ids, mesh.node_tags[surface])
+    mask = os.umask(0)
+    os.umask(mask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~mask  # the umask's permissions, not mkstemp's 0600
+    assert not list(tmp_path.glob(".field.npz*"))
     saved = read_field(out)
     np.testing.assert_array_equal(saved.points, field.points)
     np.testing.assert_array_equal(saved.displacements, field.displacements)
