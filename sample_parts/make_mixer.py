@@ -43,8 +43,7 @@ from hot2cold.kernel.topology import shape_map
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from make_rotor37 import write_step  # noqa: E402
-from make_samples import check_solid, read_step  # noqa: E402
+from make_samples import check_solid, read_step, write_step  # noqa: E402
 
 N_LOBES = 12
 R0 = 300.0               # mm, mean radius of the wall's mid-surface

@@ -49,7 +49,6 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import BSpline, CubicSpline
 
-from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
@@ -62,12 +61,8 @@ from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface, Geom_Plane, Geom_Su
 from OCP.GeomAPI import GeomAPI_IntCS, GeomAPI_Interpolate, GeomAPI_ProjectPointOnSurf
 from OCP.GeomLProp import GeomLProp_SLProps
 from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt
-from OCP.IFSelect import IFSelect_RetDone
-from OCP.Interface import Interface_Static
 from OCP.Message import Message, Message_Gravity
 from OCP.Precision import Precision
-from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
-from OCP.TCollection import TCollection_HAsciiString
 from OCP.TColgp import TColgp_Array1OfPnt, TColgp_HArray1OfPnt
 from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SOLID, TopAbs_VERTEX
@@ -78,7 +73,7 @@ from hot2cold.kernel.topology import shape_map
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from make_samples import check_solid, read_step  # noqa: E402  (the colleague's sample builder)
+from make_samples import check_solid, read_step, write_step  # noqa: E402  (the colleague's sample builder)
 
 DATA = Path("/work/shared/data/nasa_rotor37")
 CM = 10.0                # mm per cm
@@ -93,7 +88,6 @@ TURN_WEIGHT = 0.25       # weight of tangent turning against arc length in a pie
 N_CORRECT = 20           # parameter-correction rounds of a section fit
 CLEARANCE = 2.0          # mm, least distance (radial) of the extra sections outside the hub and shroud lines
 N_DENSE = 4000           # points of the dense reference polyline of a section
-STAMP = "2024-01-01T00:00:00"
 
 
 # ----------------------------------------------------------------------------------------------- reading
@@ -356,22 +350,6 @@ def loft(sections: list[np.ndarray]) -> TopoDS_Solid:
     if not maker.IsDone():
         raise RuntimeError("the loft failed")
     return TopoDS.Solid_s(maker.Shape())
-
-
-def write_step(shape: TopoDS_Shape, path: Path, author: str) -> None:
-    """AP214 STEP with a fixed header (``author`` names the script), so a re-run writes the same bytes."""
-    writer = STEPControl_Writer()   # set the statics after creating the writer, which initialises them
-    Interface_Static.SetCVal_s("write.step.schema", "AP214IS")
-    Interface_Static.SetCVal_s("write.step.product.name", path.stem)
-    if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
-        raise RuntimeError(f"cannot transfer {path.name}")
-    header = APIHeaderSection_MakeHeader(writer.Model())
-    header.SetName(TCollection_HAsciiString(path.name))
-    header.SetTimeStamp(TCollection_HAsciiString(STAMP))
-    header.SetAuthorValue(1, TCollection_HAsciiString(author))
-    header.SetOrganizationValue(1, TCollection_HAsciiString("hot2cold"))
-    if writer.Write(str(path)) != IFSelect_RetDone:
-        raise RuntimeError(f"cannot write {path}")
 
 
 # -------------------------------------------------------------------------------------------- reporting

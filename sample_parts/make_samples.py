@@ -146,8 +146,8 @@ def check_solid(shape: TopoDS_Shape, name: str) -> None:
         raise RuntimeError(f"{name}: volume {props.Mass()}")
 
 
-def write_step(shape: TopoDS_Shape, path: Path) -> None:
-    """AP214 STEP with a fixed header, so a re-run writes the same bytes."""
+def write_step(shape: TopoDS_Shape, path: Path, author: str = "hot2cold sample_parts/make_samples.py") -> None:
+    """AP214 STEP with a fixed header (``author`` names the script), so a re-run writes the same bytes."""
     writer = STEPControl_Writer()   # set the statics after creating the writer, which initialises them
     Interface_Static.SetCVal_s("write.step.schema", "AP214IS")
     Interface_Static.SetCVal_s("write.step.product.name", path.stem)
@@ -156,7 +156,7 @@ def write_step(shape: TopoDS_Shape, path: Path) -> None:
     header = APIHeaderSection_MakeHeader(writer.Model())
     header.SetName(TCollection_HAsciiString(path.name))
     header.SetTimeStamp(TCollection_HAsciiString("2024-01-01T00:00:00"))
-    header.SetAuthorValue(1, TCollection_HAsciiString("hot2cold sample_parts/make_samples.py"))
+    header.SetAuthorValue(1, TCollection_HAsciiString(author))
     header.SetOrganizationValue(1, TCollection_HAsciiString("hot2cold"))
     if writer.Write(str(path)) != IFSelect_RetDone:
         raise RuntimeError(f"cannot write {path}")
