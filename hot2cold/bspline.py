@@ -418,3 +418,39 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     out = np.full_like(nrm, np.nan)
     out[ok] = nrm[ok] / length[ok, None]
     return out
+
+
+def insert_knots(surface: BSplineSurface, axis: int, knots) -> BSplineSurface:
+    """The same surface with ``knots`` (each once) inserted in the u (``axis=0``) or v (``axis=1``) knot
+    vector: Boehm's algorithm on the homogeneous poles ``(w P, w)``, so rational surfaces keep their shape
+    exactly.  Refinement this way changes the control net, never the geometry.
+    """
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (u) or 1 (v), got {axis!r}")
+    rational = surface.weights is not None
+    w = surface.weights if rational else np.ones(surface.shape)
+    homo = np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)     # (nu, nv, 4)
+    if axis == 1:
+        homo = homo.transpose(1, 0, 2)
+    flat = (surface.u_knots if axis == 0 else surface.v_knots).copy()
+    p = surface.u_degree if axis == 0 else surface.v_degree
+    lo, hi = flat[p], flat[len(flat) - p - 1]
+    for x in np.sort(np.asarray(knots, float)):
+        if not lo < x < hi:
+            raise ValueError(f"knot {x} is not inside the domain ({lo}, {hi})")
+        k = int(np.searchsorted(flat, x, side="right")) - 1              # flat[k] <= x < flat[k + 1]
+        n = homo.shape[0]
+        new = np.empty((n + 1,) + homo.shape[1:])
+        new[:k - p + 1] = homo[:k - p + 1]
+        new[k + 1:] = homo[k:]
+        i = np.arange(k - p + 1, k + 1)
+        alpha = ((x - flat[i]) / (flat[i + p] - flat[i]))[:, None, None]
+        new[i] = alpha * homo[i] + (1.0 - alpha) * homo[i - 1]
+        homo = new
+        flat = np.insert(flat, k + 1, x)
+    if axis == 1:
+        homo = homo.transpose(1, 0, 2)
+    weights = homo[..., 3]
+    poles = homo[..., :3] / weights[..., None]
+    return BSplineSurface(poles, flat if axis == 0 else surface.u_knots, surface.v_knots if axis == 0 else flat,
+                          surface.u_degree, surface.v_degree, weights if rational else None)
