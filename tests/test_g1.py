@@ -1,0 +1,224 @@
+"""G1 correction along tangent edges (paper section 5, eq. 56-75)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_surface
+from hot2cold.faces import SIDES
+from hot2cold.g1 import NOT_ISO_SIDE, TangentEdge, correct_g1, kink_angles, tangent_edges
+from hot2cold.model import Edge, EdgeUse, Face, Part
+
+CUBIC5 = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])              # 5 poles, degree 3
+CUBIC6 = np.array([0, 0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1, 1.0])      # 6 poles, degree 3
+
+
+def _height(x, y):
+    return 0.3 * np.sin(1.3 * x) + 0.2 * np.cos(0.9 * y) + 0.05 * x * y
+
+
+def _patches(weights: bool = False) -> tuple[BSplineSurface, BSplineSurface]:
+    """Two bicubic patches (5 x 6 poles) on [0, 1]^2 sharing the row A[4, :] == B[0, :], G1 (indeed C1)
+    across it.
+
+    Non-rational: B[1] - B[0] == A[4] - A[3] with equal knot steps at the seam.  Rational: product weights
+    ``w_ij = a_i b_j`` (same ``b`` on both patches, so the common row has the same weights), for which the
+    derivative across the seam is ``(p / dU) (a_3 / a_4) (Q_4 - Q_3)`` with ``Q_i(v)`` the rational v-curves,
+    so ``B[1] - B[0] = (a_3 / a_4) (a'_0 / a'_1) (A[4] - A[3])`` keeps it C1."""
+    y = np.linspace(0.0, 3.0, 6)
+    xa = np.array([0.0, 0.4, 1.0, 1.6, 2.0])
+    a = np.stack(np.meshgrid(xa, y, indexing="ij"), axis=-1)
+    a = np.concatenate([a, _height(a[..., 0], a[..., 1])[..., None]], axis=-1)
+    ra = np.array([1.0, 1.2, 0.8, 1.3, 1.0])
+    rb = np.array([1.0, 0.7, 1.1, 0.9, 1.2])
+    cb = np.array([1.0, 0.8, 1.3, 0.9, 1.1, 1.0])
+    factor = (ra[3] / ra[4]) * (rb[0] / rb[1]) if weights else 1.0
+    b = np.empty_like(a)
+    b[0] = a[4]
+    b[1] = a[4] + factor * (a[4] - a[3])
+    xb = np.array([2.8, 3.4, 4.0])
+    for k, x in enumerate(xb, start=2):
+        b[k, :, 0] = x
+        b[k, :, 1] = y
+        b[k, :, 2] = _height(x, y)
+    wa = np.outer(ra, cb) if weights else None
+    wb = np.outer(rb, cb) if weights else None
+    return (BSplineSurface(a, CUBIC5, CUBIC6, 3, 3, wa), BSplineSurface(b, CUBIC5, CUBIC6, 3, 3, wb))
+
+
+def _part(sa: BSplineSurface, sb: BSplineSurface) -> Part:
+    """A two-face part whose only edge is side u1 of face 0 and side u0 of face 1."""
+    t = np.linspace(0.0, 1.0, 25)
+    edge = Edge(0, BSplineCurve(sa.poles[-1], CUBIC6, 3, None if sa.weights is None else sa.weights[-1]),
+                (0, 1), (0, 1))
+    faces = [Face(0, sa, np.array([0, 1, 0, 1.0]), (EdgeUse(0, t, np.column_stack([np.ones_like(t), t])),), 0),
+             Face(1, sb, np.array([0, 1, 0, 1.0]), (EdgeUse(0, t, np.column_stack([np.zeros_like(t), t])),), 0)]
+    return Part(faces, [edge], np.array([sa.poles[-1, 0], sa.poles[-1, -1]]), [(0, 1)], 6.0, None)
+
+
+ALL_SIDES = ("u0", "u1", "v0", "v1")
+
+
+def _kink(surfaces, part, edge=0):
+    fa, fb = part.edges[edge].faces
+    ua = next(u for u in part.faces[fa].uses if u.edge == edge)
+    ub = next(u for u in part.faces[fb].uses if u.edge == edge)
+    return float(np.nanmax(kink_angles(surfaces[fa], ua.uv, surfaces[fb], ub.uv)))
+
+
+def _kinked(sb: BSplineSurface, degrees: float) -> BSplineSurface:
+    """``sb`` with the interior poles of its second row lifted non-uniformly (ends kept: they lie on the tied
+    sides v0, v1) so that the kink across side u0 is about ``degrees``."""
+    poles = sb.poles.copy()
+    lift = np.array([0.0, 0.6, 1.0, 0.8, 0.4, 0.0])
+    step = np.linalg.norm(poles[1] - poles[0], axis=1).mean()
+    poles[1, :, 2] += np.radians(degrees) * step * lift
+    return sb.with_poles(poles)
+
+
+@pytest.mark.parametrize("weights", [False, True])
+def test_synthetic_kink_removed(weights):
+    sa, sb = _patches(weights)
+    part = _part(sa, sb)
+    # built G1: tangent_edges finds the seam with a hot angle at rounding level
+    edges = tangent_edges(part)
+    assert [e.edge for e in edges] == [0]
+    assert edges[0].sides == (("u1", False), ("u0", False))
+    assert edges[0].hot_angle_max < 1e-9
+    kinked = _kinked(sb, 0.5)
+    before = _kink([sa, kinked], part)
+    assert 0.2 < before < 1.5
+    surfaces, reports = correct_g1(part, [sa, kinked], [ALL_SIDES, ALL_SIDES], edges)
+    (rep,) = reports
+    assert rep.corrected and rep.reason == ""
+    assert rep.kink_before_max == pytest.approx(before)
+    assert rep.kink_after_max <= 0.01
+    assert _kink(surfaces, part) <= 0.01
+    # the common row (and everything but the interior of the second rows) is bit for bit unchanged
+    assert np.array_equal(surfaces[0].poles[-1], sa.poles[-1])
+    assert np.array_equal(surfaces[1].poles[0], sb.poles[0])
+    assert np.array_equal(surfaces[0].poles[[0, 1, 2, 4]], sa.poles[[0, 1, 2, 4]])
+    assert np.array_equal(surfaces[1].poles[[0, 2, 3, 4]], kinked.poles[[0, 2, 3, 4]])
+    assert np.array_equal(surfaces[1].poles[1, [0, -1]], kinked.poles[1, [0, -1]])
+    # both faces move, each by less than the perturbation
+    moved_a = np.abs(surfaces[0].poles - sa.poles).max()
+    moved_b = np.abs(surfaces[1].poles - kinked.poles).max()
+    perturbation = np.abs(kinked.poles - sb.poles).max()
+    assert 0 < moved_a < perturbation and 0 < moved_b < perturbation
+
+
+def test_not_iso_side_is_only_measured():
+    sa, sb = _patches()
+    part = _part(sa, sb)
+    # the edge as a pcurve that is not a side of face 1 (a diagonal): reported, not corrected
+    use = part.faces[1].uses[0]
+    diagonal = EdgeUse(0, use.t, np.column_stack([0.5 * use.t, use.t]))
+    faces = [part.faces[0], Face(1, sb, part.faces[1].uv_box, (diagonal,), 0)]
+    part2 = Part(faces, part.edges, part.vertices, part.solids, part.diagonal, None)
+    edges = [TangentEdge(0, (0, 1), (("u1", False), None), 0.0)]
+    surfaces, (rep,) = correct_g1(part2, [sa, sb], [ALL_SIDES, ALL_SIDES], edges)
+    assert not rep.corrected and rep.reason == NOT_ISO_SIDE
+    assert rep.kink_after_max == rep.kink_before_max
+    assert surfaces[0] is sa and surfaces[1] is sb
+
+
+def test_second_row_that_is_a_boundary_row_is_not_moved():
+    sa, sb = _patches()
+    # face 1 two poles deep across the seam: its second row is its far boundary
+    thin = BSplineSurface(sb.poles[:2], np.array([0, 0, 1, 1.0]), CUBIC6, 1, 3)
+    part = _part(sa, thin)
+    edges = [TangentEdge(0, (0, 1), (("u1", False), ("u0", False)), 0.0)]
+    surfaces, (rep,) = correct_g1(part, [sa, thin], [ALL_SIDES, ALL_SIDES], edges)
+    assert not rep.corrected and "opposite boundary row" in rep.reason
+    assert surfaces[1] is thin
+
+
+# ------------------------------------------------------------------------------------------------------
+# The twisted blade: four side faces meet G1 along four span-wise edges (tied whole sides); the caps meet
+# them at about 85-90 degrees.
+# ------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def blade_part(blade_shape):
+    from hot2cold.kernel.topology import decompose
+    return decompose(blade_shape)
+
+
+def test_tangent_edges_of_blade(blade_part):
+    found = tangent_edges(blade_part)
+    assert len(found) == 4
+    for te in found:
+        assert None not in te.sides                       # whole sides of both faces
+        assert te.hot_angle_max < 1e-3
+        for k in te.faces:
+            assert blade_part.faces[k].surface.shape[0] > 2  # side faces, not the planar caps
+    # every other two-face edge meets at a sharp angle (the caps, at ~85-90 deg)
+    others = {e.index for e in blade_part.edges} - {te.edge for te in found}
+    for e in others:
+        edge = blade_part.edges[e]
+        fa, fb = (blade_part.faces[k] for k in edge.faces)
+        ua = next(u for u in fa.uses if u.edge == e)
+        ub = next(u for u in fb.uses if u.edge == e)
+        assert np.nanmax(kink_angles(fa.surface, ua.uv, fb.surface, ub.uv)) > 60
+    side_faces = {f.index for f in blade_part.faces if f.surface.shape[0] > 2}
+    assert {te.edge for te in found} == {e.index for e in blade_part.edges if set(e.faces) <= side_faces}
+
+
+def test_blade_kinks_removed(blade_part):
+    part = blade_part
+    found = tangent_edges(part)
+    hot = [f.surface for f in part.faces]
+    surfaces = list(hot)
+    rng = np.random.default_rng(7)
+    perturbed_rows = {}
+    for te in found:
+        for k, (side, _) in zip(te.faces, te.sides):
+            axis, end = SIDES[side]
+            s = surfaces[k]
+            i = 1 if end == 0 else s.shape[axis] - 2
+            poles = s.poles.copy()
+            row = poles[i] if axis == 0 else poles[:, i]
+            n = len(row)
+            # smooth, non-affine, different per row; the row's ends lie on the tied cap edges and stay
+            shape = np.sin(np.pi * np.linspace(0, 1, n)) ** 2 * (1 + 0.5 * np.cos(3 * np.linspace(0, 1, n)))
+            # about 0.5 deg: the lift relative to the distance between the side row and the second row
+            side_row = poles[0 if end == 0 else -1] if axis == 0 else poles[:, 0 if end == 0 else -1]
+            step = np.linalg.norm(row - side_row, axis=1).mean()
+            direction = rng.normal(size=3)
+            row += np.radians(0.5) * step * shape[:, None] * direction / np.linalg.norm(direction)
+            surfaces[k] = s.with_poles(poles)
+            perturbed_rows.setdefault(k, []).append((axis, i))
+    perturbed = list(surfaces)
+    perturbation = max(np.abs(a.poles - b.poles).max() for a, b in zip(perturbed, hot))
+    tied = [("u0", "u1", "v0", "v1") if f.surface.shape[0] > 2 else () for f in part.faces]
+    corrected, reports = correct_g1(part, perturbed, tied, found)
+    assert len(reports) == 4
+    for rep, te in zip(reports, found):
+        assert rep.corrected, rep.reason
+        assert 0.1 < rep.kink_before_max < 2
+        assert rep.kink_after_max <= 0.01
+        # common edge rows unchanged bit for bit
+        for k, (side, _) in zip(te.faces, te.sides):
+            axis, end = SIDES[side]
+            i = 0 if end == 0 else hot[k].shape[axis] - 1
+            index = (i, slice(None)) if axis == 0 else (slice(None), i)
+            assert np.array_equal(corrected[k].poles[index], perturbed[k].poles[index])
+    for k, (new, old) in enumerate(zip(corrected, perturbed)):
+        moved = np.abs(new.poles - old.poles).max(axis=-1)
+        assert moved.max() < perturbation
+        # nothing but the perturbed second rows moved
+        mask = np.zeros(moved.shape, bool)
+        for axis, i in perturbed_rows.get(k, []):
+            if axis == 0:
+                mask[i] = True
+            else:
+                mask[:, i] = True
+        assert not moved[~mask].any()
+        # and the surface moves less than the perturbation moved it
+        u0, u1, v0, v1 = new.domain
+        uu, vv = np.meshgrid(np.linspace(u0, u1, 30), np.linspace(v0, v1, 30), indexing="ij")
+        d_fix = np.linalg.norm(evaluate_surface(new, uu.ravel(), vv.ravel())
+                               - evaluate_surface(old, uu.ravel(), vv.ravel()), axis=1)
+        d_pert = np.linalg.norm(evaluate_surface(old, uu.ravel(), vv.ravel())
+                                - evaluate_surface(hot[k], uu.ravel(), vv.ravel()), axis=1)
+        assert d_fix.max() <= d_pert.max() + 1e-12
