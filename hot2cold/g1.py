@@ -281,7 +281,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
 
     reports = []
     for te, (uv_a, uv_b), kb, reason in zip(edges, matched, before, reasons):
-        after = kb if reason else _max(kink_angles(surfaces[te.faces[0]], uv_a, surfaces[te.faces[1]], uv_b))
+        # measured on the final surfaces for every edge: a face's other corrections may touch this one too
+        after = _max(kink_angles(surfaces[te.faces[0]], uv_a, surfaces[te.faces[1]], uv_b))
         reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason))
         if not reason:
             log.info("G1: edge %d (faces %d, %d): kink %.3g -> %.3g deg", te.edge, *te.faces, kb, after)

@@ -133,6 +133,35 @@ def test_second_row_that_is_a_boundary_row_is_not_moved():
     assert surfaces[1] is thin
 
 
+def test_second_row_claimed_twice_is_corrected_once():
+    """A middle face three poles deep between two others: the second rows at its sides u0 and u1 are the
+    same row, so only the first edge is corrected and the second is reported."""
+    sa, sb = _patches()
+    middle = BSplineSurface(np.stack([sa.poles[-1], sb.poles[1], sb.poles[2]]), np.array([0, 0, 0, 1, 1, 1.0]),
+                            CUBIC6, 2, 3)
+    middle = _kinked(middle, 0.5)
+    far = sb.with_poles(sb.poles + np.array([2.0, 0.0, 0.0]))
+    far = far.with_poles(np.concatenate([middle.poles[-1:], far.poles[1:]]))
+    t = np.linspace(0.0, 1.0, 25)
+
+    def use(edge, u):
+        return EdgeUse(edge, t, np.column_stack([np.full_like(t, u), t]))
+
+    box = np.array([0, 1, 0, 1.0])
+    faces = [Face(0, sa, box, (use(0, 1.0),), 0), Face(1, middle, box, (use(0, 0.0), use(1, 1.0)), 0),
+             Face(2, far, box, (use(1, 0.0),), 0)]
+    edges = [Edge(0, BSplineCurve(sa.poles[-1], CUBIC6, 3), (0, 1), (0, 1)),
+             Edge(1, BSplineCurve(middle.poles[-1], CUBIC6, 3), (2, 3), (1, 2))]
+    part = Part(faces, edges, np.zeros((4, 3)), [(0, 1, 2)], 8.0, None)
+    tangent = [TangentEdge(0, (0, 1), (("u1", False), ("u0", False)), 0.0),
+               TangentEdge(1, (1, 2), (("u1", False), ("u0", False)), 0.0)]
+    surfaces, reports = correct_g1(part, [sa, middle, far], [ALL_SIDES] * 3, tangent)
+    assert [r.corrected for r in reports] == [True, False]
+    assert "also the second row of edge 0" in reports[1].reason
+    assert reports[0].kink_after_max <= 0.01 < reports[0].kink_before_max
+    assert surfaces[2] is far
+
+
 # ------------------------------------------------------------------------------------------------------
 # The twisted blade: four side faces meet G1 along four span-wise edges (tied whole sides); the caps meet
 # them at about 85-90 degrees.
