@@ -3,7 +3,8 @@
     hot2cold morph HOT.step FIELD.csv -o COLD.step --report REPORT.json
 
 Exit codes: 0 success; 2 unusable input (file, field, option); 3 kernel failure; 4 the cold part is not a
-valid closed solid (nothing written); 70 internal error; 130 interrupted.
+valid closed solid (nothing written); 5 written, but --tolerance not met; 70 internal error; 130
+interrupted.
 """
 from __future__ import annotations
 
@@ -40,6 +41,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
     m.add_argument("--invert", action="store_true",
                    help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
+    m.add_argument("--tolerance", type=float, metavar="MM",
+                   help="largest accepted error: faces that miss it are refined by knot insertion; exit code 5 "
+                   "when it still is not met")
     m.add_argument("--node-distance", type=float, metavar="MM",
                    help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     m.add_argument("--edge-distance", type=float, metavar="MM",
@@ -97,7 +101,8 @@ def _morph(args) -> int:
     if args.report:
         _check_output(args.hot, args.report, "report")
     try:
-        settings = Settings(node_distance=args.node_distance, edge_distance=args.edge_distance)
+        settings = Settings(node_distance=args.node_distance, edge_distance=args.edge_distance,
+                            tolerance=args.tolerance)
     except ValueError as exc:
         raise InputError(str(exc)) from exc
     progress = None if args.quiet else _Progress(sys.stderr)
@@ -111,6 +116,10 @@ def _morph(args) -> int:
     result.write_step(args.output)
     if not args.quiet:
         print(f"wrote {args.output}")
+    if result.report.tolerance_met is False:
+        print(f"hot2cold: tolerance {args.tolerance} mm not met (Δmax {result.report.delta_max:.3g} mm); "
+              f"the cold part is written", file=sys.stderr)
+        return 5
     return 0
 
 

@@ -129,6 +129,14 @@ def _matched_uv(use_a: EdgeUse, use_b: EdgeUse) -> tuple[np.ndarray, np.ndarray]
     return use_a.uv, _uv_at(use_b, use_a.t)
 
 
+def kink_added(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> float:
+    """How much the morph opened the angle (degrees) between the faces of a tangent ``edge``: the largest
+    kink between the morphed ``surfaces`` along it, less the hot one."""
+    fa, fb = edge.faces
+    uv_a, uv_b = _matched_uv(_use_of(part.faces[fa], edge.edge), _use_of(part.faces[fb], edge.edge))
+    return _max(kink_angles(surfaces[fa], uv_a, surfaces[fb], uv_b)) - edge.hot_angle_max
+
+
 def _max(angles: np.ndarray) -> float:
     finite = angles[np.isfinite(angles)]
     return float(finite.max()) if finite.size else float("nan")

@@ -1,13 +1,14 @@
 """The hot-to-cold morph, end to end, in the order of the paper.
 
-load -> classify nodes -> edges -> faces -> rebuild -> sew -> report
+load -> classify nodes -> edges -> faces (with artificial nodes; refined to a tolerance if one is set)
+-> G1 -> rebuild -> sew -> report
 """
 from __future__ import annotations
 
 import logging
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -16,8 +17,9 @@ from .artificial import FieldEstimator
 from .classify import Classification, classify_nodes
 from .edges import EdgeMorph, morph_edges, vertex_displacements
 from .errors import FieldError, MorphError
-from .faces import FaceMorph, morph_faces
+from .faces import FaceMorph, morph_face, morph_faces
 from .field import DisplacementField, as_field
+from .g1 import correct_g1, kink_added, tangent_edges
 from .invert import invert_field
 from .kernel.check import check_solids
 from .kernel.project import OUTSIDE, Projector
@@ -27,10 +29,14 @@ from .kernel.shapes import to_cadquery
 from .kernel.step import write_step
 from .load import load_part
 from .model import Part
+from .refine import refine_face
 from .report import Report, build_report, node_errors
 from .settings import Settings
 
 log = logging.getLogger(__name__)
+
+#: A kink (degrees) the morph adds below this is rounding: such edges are left as they are.
+_KINK_NOISE_DEG = 1e-6
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
@@ -120,10 +126,32 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     lap("edges")
     report_progress("edges")
 
+    def trimmed_away(k, uv):
+        return projector.classify(k, uv) == OUTSIDE
+
     face_morphs = morph_faces(part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                              trimmed_away=lambda k, uv: projector.classify(k, uv) == OUTSIDE,
+                              trimmed_away=trimmed_away,
                               progress=lambda done, total: report_progress("faces", done, total))
     lap("faces")
+    refinements = []
+    if settings.tolerance is not None:
+        for k, face in enumerate(part.faces):
+            def fit(refined, k=k):
+                return morph_face(refined, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                                  lambda uv: trimmed_away(k, uv))
+            face_morphs[k], refinement = refine_face(face, face_morphs[k], cls, field, settings.tolerance,
+                                                     settings.max_refinements, fit)
+            if refinement is not None:
+                refinements.append(refinement)
+        lap("refine")
+    g1_reports = []
+    if settings.g1_angle is not None:
+        surfaces = [f.surface for f in face_morphs]
+        kinked = [e for e in tangent_edges(part, settings.g1_angle)
+                  if kink_added(part, surfaces, e) > _KINK_NOISE_DEG]     # a morph that adds none moves none
+        surfaces, g1_reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
+        face_morphs = [replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)]
+        lap("g1")
 
     cold_vertices = part.vertices + vertex_disp
     rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
@@ -137,7 +165,9 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     lap("report")
     report = build_report(part, cls, field, face_morphs, edge_morphs, errors, gaps, hot_checks, cold_checks,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-                          timings=timings, inversion=None if inversion is None else asdict(inversion))
+                          timings=timings, inversion=None if inversion is None else asdict(inversion),
+                          tolerance=settings.tolerance, refinements=[asdict(r) for r in refinements],
+                          g1=[asdict(r) for r in g1_reports])
     report_progress("report")
     result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
                          part=part, classification=cls, faces=face_morphs, edges=edge_morphs)

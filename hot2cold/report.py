@@ -93,6 +93,17 @@ class Report:
     solids: list[SolidReport]
     timings: dict[str, float] = field(default_factory=dict)
     inversion: dict | None = None
+    tolerance: float | None = None
+    refinements: list[dict] = field(default_factory=list)
+    g1: list[dict] = field(default_factory=list)
+
+    @property
+    def tolerance_met(self) -> bool | None:
+        """Whether every face's and edge's Δmax is within the tolerance (None when none was set)."""
+        if self.tolerance is None:
+            return None
+        worst = [x.delta_max for x in (*self.faces, *self.edges) if not math.isnan(x.delta_max)]
+        return max(worst, default=0.0) <= self.tolerance
 
     @property
     def nodes_used(self) -> int:
@@ -103,6 +114,7 @@ class Report:
         data = asdict(self)
         data["nodes_used"] = self.nodes_used
         data["closed"] = self.free_edges == 0
+        data["tolerance_met"] = self.tolerance_met
         return _no_nan(data)
 
     def to_json(self, path) -> None:
@@ -127,6 +139,17 @@ class Report:
             lines.append(f"solid {s.index}: {'valid' if s.valid else 'INVALID'}, "
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
+        for r in self.refinements:
+            lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles "
+                         f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds)")
+        if self.g1:
+            before = max((g["kink_before_max"] for g in self.g1), default=0.0)
+            after = max((g["kink_after_max"] for g in self.g1), default=0.0)
+            fixed = sum(bool(g["corrected"]) for g in self.g1)
+            lines.append(f"G1: {len(self.g1)} tangent edges ({fixed} corrected), kink before {before:.3g}°, "
+                         f"after {after:.3g}°")
+        if self.tolerance is not None:
+            lines.append(f"tolerance {self.tolerance:.3g} mm: {'met' if self.tolerance_met else 'NOT met'}")
         if self.inversion:
             lines.append(f"field inverted (cold to hot): {self.inversion['iterations']} fixed-point iterations, "
                          f"residual {self.inversion['residual']:.2e} mm")
@@ -175,7 +198,9 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
 def build_report(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
                  edge_morphs: list[EdgeMorph], errors: np.ndarray, gaps: np.ndarray,
                  hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], hot_name: str = "",
-                 timings: dict[str, float] | None = None, inversion: dict | None = None) -> Report:
+                 timings: dict[str, float] | None = None, inversion: dict | None = None,
+                 tolerance: float | None = None, refinements: list[dict] | None = None,
+                 g1: list[dict] | None = None) -> Report:
     """Assemble the :class:`Report` of a morph."""
     faces = []
     for fm in face_morphs:
@@ -204,4 +229,5 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
         delta_max=_stats(all_err)[0], delta_mean=_stats(all_err)[1],
         vertex_delta_max=_stats(vertex_err)[0],
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
-        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion)
+        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
+        tolerance=tolerance, refinements=list(refinements or []), g1=list(g1 or []))

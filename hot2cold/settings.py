@@ -40,6 +40,14 @@ class Settings:
         Weight of an artificial node's row in a fit, against 1 for an FE node: artificial nodes settle the
         poles the FE nodes leave open (empty or thin knot spans, trimmed-away parts) without pulling the
         surface away from the FE nodes where both are present.
+    tolerance : float or None
+        The largest error (mm) the user accepts.  Faces whose fit misses it are refined by knot insertion
+        (the hot shape is kept exactly) and fitted again; None keeps every knot vector, as the paper does.
+    max_refinements : int
+        Rounds of refinement a face gets at the most.
+    g1_angle : float or None
+        Edges where the hot faces meet within this angle (degrees) are tangent; after the morph their
+        kink is corrected (paper section 5).  None: no G1 correction.
     edge_samples_per_span : int
         Points per knot span at which a morphed edge that is not an iso-curve of a face constrains that
         face's fit (keeps trimmed faces on their edges).
@@ -53,9 +61,12 @@ class Settings:
     vertex_neighbours: int = 20
     edge_samples_per_span: int = 4
     artificial_weight: float = 0.1
+    tolerance: float | None = None
+    max_refinements: int = 4
+    g1_angle: float | None = 1.0
 
     def __post_init__(self):
-        for name in ("node_distance", "edge_distance"):
+        for name in ("node_distance", "edge_distance", "tolerance"):
             value = getattr(self, name)
             if value is not None and not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive length in mm, got {value!r}")
@@ -65,6 +76,8 @@ class Settings:
                 raise ValueError(f"{name} must be positive, got {value!r}")
         if self.vertex_neighbours < 4:
             raise ValueError(f"vertex_neighbours must be at least 4, got {self.vertex_neighbours}")
+        if self.max_refinements < 0:
+            raise ValueError(f"max_refinements must be at least 0, got {self.max_refinements}")
         if self.edge_samples_per_span < 1:
             raise ValueError(f"edge_samples_per_span must be at least 1, got {self.edge_samples_per_span}")
 

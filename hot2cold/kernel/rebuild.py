@@ -1,6 +1,7 @@
 """Rebuilding the cold part: the morphed poles written into the kernel's working copy.
 
-Only poles move (same degrees, knots and weights), and they move in the very geometry objects the
+Only poles move (same degrees, knots and weights; a face refined to meet a tolerance gets the refined
+record's extra knots first, which leaves its shape as it was), and they move in the very geometry objects the
 working copy's faces and edges hold, so the topology of the hot part is kept: every edge is still one edge
 used by both of its faces, every vertex one vertex.  Vertices are moved to the ends of their morphed edges.
 """
@@ -20,6 +21,18 @@ from .topology import KernelPart
 log = logging.getLogger(__name__)
 
 
+def _insert_missing_knots(surface, record: BSplineSurface) -> None:
+    """Insert into the kernel surface the knots a refined record has and it lacks (shape unchanged)."""
+    for knots, flat, insert in ((record.u_knots, surface.UKnotSequence(), surface.InsertUKnot),
+                                (record.v_knots, surface.VKnotSequence(), surface.InsertVKnot)):
+        have = list(flat)
+        for x in knots:
+            if x in have:
+                have.remove(x)
+            else:
+                insert(float(x), 1, 0.0, True)
+
+
 def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSplineCurve | None],
             vertices: np.ndarray) -> None:
     """Write morphed geometry into ``kernel.work`` in place.
@@ -35,6 +48,7 @@ def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSp
                           f"got {len(surfaces)} and {len(curves)}")
     try:
         for (surface, trsf), record in zip(kernel.surfaces, surfaces):
+            _insert_missing_knots(surface, record)
             set_surface_poles(surface, record.poles, trsf)
         for entry, record in zip(kernel.curves, curves):
             if entry is not None:
