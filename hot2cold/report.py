@@ -140,6 +140,10 @@ class Report:
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
         for r in self.refinements:
+            if r["rounds"] == 0:
+                lines.append(f"face {r['face']} misses the tolerance (fit residual {r['residual']:.2e} mm) and "
+                             f"cannot be refined: the rows that refinement would lengthen are tied to edges")
+                continue
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles "
                          f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds)")
         if self.g1:

@@ -32,3 +32,22 @@ def test_insert_knots_keeps_the_surface_and_matches_the_kernel(rational, axis):
     oracle = surface_to_record(kernel)
     assert np.abs(oracle.poles - refined.poles).max() <= 1e-12
     assert np.array_equal(oracle.u_knots, refined.u_knots) and np.array_equal(oracle.v_knots, refined.v_knots)
+
+
+def test_tolerance_refines_a_face_that_cannot_follow_the_field(tmp_path):
+    """The blade's planar tip cap (a 2x2 bilinear net) cannot bend: with --tolerance it is refined."""
+    from hot2cold.kernel.sampling import fe_surface_nodes
+    from hot2cold.kernel.step import read_step
+    from hot2cold.morph import morph
+    from hot2cold.settings import Settings
+    from conftest import SAMPLES
+    shape = read_step(SAMPLES / "twisted_blade.step")
+    nodes = fe_surface_nodes(shape, 1.0, seed=1)[0]
+    bend = np.column_stack([np.zeros(len(nodes)), np.zeros(len(nodes)), 2e-3 * nodes[:, 0] ** 2])   # bends the caps
+    plain = morph(shape, (nodes, bend))
+    refined = morph(shape, (nodes, bend), Settings(tolerance=1e-3))
+    caps = [f.index for f in plain.report.faces if f.control_points == "2x2"]
+    assert max(plain.report.faces[k].delta_max for k in caps) > 1e-2
+    assert max(refined.report.faces[k].delta_max for k in caps) < max(plain.report.faces[k].delta_max for k in caps) / 10
+    assert {r["face"] for r in refined.report.refinements if r["rounds"] > 0} >= set(caps)
+    assert all(s.valid and s.closed for s in refined.report.solids)
