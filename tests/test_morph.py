@@ -141,3 +141,29 @@ def test_analytic_faces_and_several_solids_morph_exactly(name):
     assert len(result.report.solids) == n_solids
     assert all(s.valid and s.closed for s in result.report.solids)
     assert max(d.max() for d in face_deviation(result, THERMAL.exact_map, spacing=1.0)) <= 1e-8
+
+
+def test_trimmed_faces_do_not_wander_over_their_untrimmed_domain():
+    """Rotor 37's faces are trimmed by hub and shroud: artificial nodes over the trimmed-away part keep the
+    whole untrimmed surface on the affine field's continuation, and every fit keeps full rank."""
+    from conftest import SAMPLES
+    from hot2cold.kernel.sampling import fe_surface_nodes
+    shape = read_step(SAMPLES / "rotor37_blade.step")
+    nodes = fe_surface_nodes(shape, 1.0, seed=1)[0]
+    result = morph(shape, (nodes, THERMAL(nodes)))
+    for face, fm in zip(result.part.faces, result.faces):
+        u0, u1, v0, v1 = face.surface.domain
+        uu, vv = np.meshgrid(np.linspace(u0, u1, 60), np.linspace(v0, v1, 60))
+        hot = evaluate_surface(face.surface, uu.ravel(), vv.ravel())
+        cold = evaluate_surface(fm.surface, uu.ravel(), vv.ravel())
+        assert np.linalg.norm(cold - THERMAL.exact_map(hot), axis=1).max() <= 1e-4
+        assert fm.rank == fm.unknowns
+    assert sum(f.artificial_nodes for f in result.report.faces) > 0
+
+
+def test_g1_edges_are_reported_and_not_worsened(blade_shape, blade_nodes):
+    result = morph(blade_shape, (blade_nodes, UNTWIST(blade_nodes)))
+    g1 = result.report.g1
+    assert len(g1) == 4                                   # the blade's four span-wise tangent edges
+    assert all(g["kink_after_max"] <= g["kink_before_max"] + 1e-9 for g in g1)
+    assert max(g["kink_after_max"] for g in g1) < 0.05    # degrees
