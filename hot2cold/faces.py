@@ -163,10 +163,11 @@ def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
 
 def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
                edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-               settings: Settings, trimmed_away: Callable[[np.ndarray], np.ndarray] | None = None) -> FaceMorph:
+               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None) -> FaceMorph:
     """Morph one face with its boundary taken from the morphed edges.
 
-    ``trimmed_away(uv (m, 2)) -> (m,) bool`` tells which parameters lie outside the face's trimmed domain.
+    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
+    domain.
     """
     surface = face.surface
     nu, nv = surface.shape
@@ -201,7 +202,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     uv = np.concatenate(uv_rows)
     target = np.concatenate(target_rows)
 
-    centres = _artificial_parameters(surface, uv, trimmed_away)
+    outside = None if trimmed_away is None else (lambda p: trimmed_away(face.index, p))
+    centres = _artificial_parameters(surface, uv, outside)
     weight = np.ones(len(uv))
     if len(centres):
         uv = np.concatenate([uv, centres])
@@ -232,8 +234,8 @@ def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_
     """
     out = []
     for face in part.faces:
-        outside = None if trimmed_away is None else (lambda uv, k=face.index: trimmed_away(k, uv))
-        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, outside))
+        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                              trimmed_away))
         if progress is not None:
             progress(len(out), len(part.faces))
     log.info("morphed %d faces", len(out))

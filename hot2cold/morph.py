@@ -103,7 +103,7 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
         if progress is not None:
             progress(stage, done, total)
 
-    field = as_field(field, units, field_name=field_name) if field_name else as_field(field, units)
+    field = as_field(field, units, field_name)
     inversion = None
     if invert:
         field, inversion = invert_field(field)
@@ -135,10 +135,11 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     lap("faces")
     refinements = []
     if settings.tolerance is not None:
+        def fit(refined):
+            return morph_face(refined, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                              trimmed_away)
+
         for k, face in enumerate(part.faces):
-            def fit(refined, k=k):
-                return morph_face(refined, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                                  lambda uv: trimmed_away(k, uv))
             face_morphs[k], refinement = refine_face(face, face_morphs[k], cls, field, settings.tolerance,
                                                      settings.max_refinements, fit)
             if refinement is not None:
