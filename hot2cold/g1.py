@@ -28,11 +28,11 @@ angles are in degrees.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .bspline import BSplineSurface, surface_derivative_bases, surface_normals
+from .bspline import BSplineCurve, BSplineSurface, surface_derivative_bases, surface_normals
 from .faces import SIDES, _side_of
 from .lstsq import solve_tsvd
 from .model import EdgeUse, Face, Part
@@ -177,6 +177,19 @@ def _row_mask(shape: tuple[int, int], side: str, second: bool = False) -> np.nda
     return mask
 
 
+def _fixed_reason(face: Face, found: tuple[str, bool] | None, tied: tuple[str, ...]) -> str:
+    """Why ``face`` cannot turn about an edge that runs along its side ``found`` (``_side_of``; None when the
+    edge is not a whole side), or "" when its second row there has poles free to move."""
+    if found is None:
+        return NOT_ISO_SIDE
+    side = found[0]
+    if face.surface.shape[SIDES[side][0]] < 3:
+        return f"the second row of face {face.index} at side {side} is its opposite boundary row"
+    if not (_row_mask(face.surface.shape, side, True) & ~_held_poles(face, tied)).any():
+        return f"every pole of the second row of face {face.index} at side {side} is held"
+    return ""
+
+
 def _held_poles(face: Face, tied: tuple[str, ...]) -> np.ndarray:
     """Boolean ``(nu, nv)`` mask of the poles on the face's tied sides and on sides that are whole edges."""
     shape = face.surface.shape
@@ -219,8 +232,11 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     Returns
     -------
     The surfaces (a new list; faces left alone keep their surface object) and one :class:`G1Report` per
-    edge of ``edges``.  An edge is corrected when it is a whole side of both faces, each face has a second
-    row that is not a boundary row of its own, and no other edge claims the same second row.
+    edge of ``edges``.  A face can turn about an edge when the edge is a whole side of it and its second row
+    there is not its opposite boundary row and has poles that no edge holds.  When both faces can, both turn
+    to the common plane (eq. 63); when one can, it turns into the other's tangent plane; when neither can,
+    the edge is only measured.  A face's second rows for all its edges are solved at once, so a row that is
+    the second row of two edges (a face three poles deep) serves both in the least-squares sense.
     """
     if len(face_surfaces) != len(part.faces) or len(tied_sides) != len(part.faces):
         raise ValueError(f"{len(part.faces)} faces but {len(face_surfaces)} surfaces and "
@@ -231,7 +247,6 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     surfaces = list(face_surfaces)
 
     matched, before, reasons = [], [], []
-    claimed: dict[tuple[int, str], int] = {}   # (face, second-row key) -> edge that claimed it
     tasks: list[_Task] = []
     for r, te in enumerate(edges):
         fa, fb = (part.faces[k] for k in te.faces)
@@ -240,49 +255,39 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         matched.append((uv_a, uv_b))
         before.append(_max(kink_angles(surfaces[fa.index], uv_a, surfaces[fb.index], uv_b)))
         sides = (_side_of(fa.surface, use_a), _side_of(fb.surface, use_b))
-        reason = ""
-        if sides[0] is None or sides[1] is None:
-            reason = NOT_ISO_SIDE
-        else:
-            for face, (side, _) in zip((fa, fb), sides):
-                axis, end = SIDES[side]
-                n_cross = face.surface.shape[axis]
-                key = (face.index, f"{'uv'[axis]}{1 if end == 0 else n_cross - 2}")
-                if n_cross < 3:
-                    reason = f"the second row of face {face.index} at side {side} is its opposite boundary row"
-                elif key in claimed:
-                    reason = (f"the second row of face {face.index} at side {side} is also the second row of "
-                              f"edge {claimed[key]}")
-                elif not (_row_mask(face.surface.shape, side, True)
-                          & ~_held_poles(face, tied_sides[face.index])).any():
-                    reason = f"every pole of the second row of face {face.index} at side {side} is held"
-                if reason:
-                    break
-        if reason:
+        why = [_fixed_reason(face, found, tied_sides[face.index]) for face, found in zip((fa, fb), sides)]
+        if all(why):
+            reason = why[0] if why[0] == why[1] else "; ".join(why)
             log.info("G1: edge %d (faces %d, %d) not corrected: %s", te.edge, *te.faces, reason)
             reasons.append(reason)
             continue
         reasons.append("")
-        for face, (side, _) in zip((fa, fb), sides):
-            axis, end = SIDES[side]
-            claimed[(face.index, f"{'uv'[axis]}{1 if end == 0 else face.surface.shape[axis] - 2}")] = te.edge
+        if any(why):
+            log.info("G1: edge %d (faces %d, %d): one face moves (%s)", te.edge, *te.faces, why[0] or why[1])
         # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
-        n_row = max(fa.surface.shape[1 - SIDES[sides[0][0]][0]], fb.surface.shape[1 - SIDES[sides[1][0]][0]])
+        n_row = max(face.surface.shape[1 - SIDES[found[0]][0]] for face, found in zip((fa, fb), sides) if found)
         m = max(n_points_factor * n_row, 2)
         t = np.linspace(min(use_a.t[0], use_a.t[-1]), max(use_a.t[0], use_a.t[-1]), m)
         uvs = []
-        for face, use, (side, _) in zip((fa, fb), (use_a, use_b), sides):
+        for face, use, found in zip((fa, fb), (use_a, use_b), sides):
             uv = _uv_at(use, t)
-            axis, end = SIDES[side]
-            uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
+            if found is not None:
+                axis, end = SIDES[found[0]]
+                uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
             uvs.append(uv)
         na = surface_normals(surfaces[fa.index], uvs[0][:, 0], uvs[0][:, 1])
         nb = surface_normals(surfaces[fb.index], uvs[1][:, 0], uvs[1][:, 1])
         keep = np.isfinite(na).all(axis=1) & np.isfinite(nb).all(axis=1)
         sign = np.where(np.sum(na * nb, axis=1) < 0, -1.0, 1.0)
-        normal_t = na + sign[:, None] * nb                                      # eq. (63)
-        for face, uv, (side, _) in zip((fa, fb), uvs, sides):
-            tasks.append(_Task(r, face.index, side, uv, normal_t, keep))
+        if why[0]:
+            normal_t = na                          # face a cannot move: b turns into its tangent plane
+        elif why[1]:
+            normal_t = nb
+        else:
+            normal_t = na + sign[:, None] * nb                                  # eq. (63)
+        for face, uv, found, fixed in zip((fa, fb), uvs, sides, why):
+            if not fixed:
+                tasks.append(_Task(r, face.index, found[0], uv, normal_t, keep))
 
     for k in sorted({task.face for task in tasks}):
         _solve_face(part.faces[k], surfaces, tied_sides[k], [t for t in tasks if t.face == k])
@@ -329,3 +334,281 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[str, ...
     poles = surface.poles.copy()
     poles.reshape(-1, 3)[cols] += sol.x
     surfaces[face.index] = surface.with_poles(poles)
+
+
+# ------------------------------------------------------------------------------------------------------
+# Corners: the ends of tangent edges (beyond the paper).
+#
+# At a vertex the cross derivative of a face is the tangent of its other edge there (for an untrimmed face
+# the second row's end pole is that edge's pole next to the vertex), so the second-row correction above
+# cannot remove a kink at the ends of a tangent edge: the edges, each fitted on its own, decide it.  Faces
+# that are tangent at a vertex have one tangent plane there exactly when all their edges' tangents at the
+# vertex lie in one plane; this is restored on the morphed edges, before the faces are fitted to them.
+# ------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class CornerReport:
+    """What :func:`correct_corners` did at one vertex where tangent faces meet (angles in degrees).
+
+    Attributes
+    ----------
+    vertex : int.
+    faces : tuple of int, the faces that meet tangentially there (joined by tangent edges at the vertex).
+    hot_angle, angle_before, angle_after : float, the largest angle between two of those faces' normal lines
+        at the vertex (estimated from the tangents of each face's two edges there) on the hot part, on the
+        morphed edges, and after the correction.
+    edges : tuple of int, edges whose pole next to the vertex moved.
+    reason : str, why nothing moved (empty when corrected).
+    """
+
+    vertex: int
+    faces: tuple[int, ...]
+    hot_angle: float
+    angle_before: float
+    angle_after: float
+    edges: tuple[int, ...]
+    reason: str
+
+
+def _end_tangent(curve: BSplineCurve, at_start: bool) -> np.ndarray:
+    """Direction ``(3,)`` of ``curve`` at an end, pointing into the curve: ``P_1 - P_0`` or ``P_n-2 - P_n-1``
+    (parallel to the end derivative of a clamped curve, rational or not)."""
+    poles = curve.poles
+    return poles[1] - poles[0] if at_start else poles[-2] - poles[-1]
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(x)
+    return x / norm if norm > 0 else np.full_like(x, np.nan)
+
+
+def _line_angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), abs(np.dot(a, b)))))
+
+
+#: A face whose two edges meet at a vertex at less than this angle (degrees, hot) has a smooth boundary
+#: there: its edges do not decide its normal.
+_MIN_CORNER_DEG = 5.0
+
+
+def _edges_at(part: Part, face: int, vertex: int) -> list:
+    return [e for e in part.edges if face in e.faces and vertex in e.vertices and not e.degenerate
+            and e.vertices[0] != e.vertices[1]]
+
+
+def _corner_normals(part: Part, faces: list[int], vertex: int, curves: list[BSplineCurve | None]) -> dict:
+    """Per face of ``faces`` with exactly two edges at ``vertex`` meeting at a corner (not tangent to each
+    other on the hot part): the unit normal ``(3,)`` from the cross product of their tangents there on
+    ``curves`` (orientation arbitrary)."""
+    out = {}
+    for k in faces:
+        at = _edges_at(part, k, vertex)
+        if len(at) != 2:
+            continue
+        hot = [_end_tangent(e.curve, e.vertices[0] == vertex) for e in at]
+        if _line_angle(*hot) < _MIN_CORNER_DEG:
+            continue
+        t = [_end_tangent(curves[e.index], e.vertices[0] == vertex) for e in at]
+        n = _unit(np.cross(t[0], t[1]))
+        if np.isfinite(n).all():
+            out[k] = n
+    return out
+
+
+def _cluster_normals(part: Part, faces: list[int], vertex: int, curves: list[BSplineCurve | None],
+                     fixed: dict, decided: set | None) -> dict:
+    """Normals at ``vertex`` of the faces of a cluster: ``fixed`` ones (anchors) as given, the others from
+    their edges' tangents on ``curves`` where ``decided`` (None: wherever two edges meet at a corner)."""
+    out = _corner_normals(part, faces, vertex, curves)
+    if decided is not None:
+        out = {k: n for k, n in out.items() if (vertex, k) in decided}
+    out.update(fixed)
+    return out
+
+
+def edge_decided(part: Part, tied_sides: list[tuple[str, ...]] | None = None) -> set[tuple[int, int]]:
+    """The ``(vertex, face)`` pairs where the face's normal at the vertex is the cross product of its two
+    edges' tangents: the vertex is a corner of the face's surface and both edges there are whole sides,
+    tied to the face's rows (``FaceMorph.tied_sides``; None: before the fit, every whole side counts), so
+    the poles next to the corner are those edges' poles."""
+    out = set()
+    for face in part.faces:
+        sides = {}
+        for use in face.uses:
+            found = _side_of(face.surface, use)
+            if found is not None:
+                sides[use.edge] = found[0]
+        for v in {v for e in sides for v in part.edges[e].vertices}:
+            at = _edges_at(part, face.index, v)
+            tied = sides.values() if tied_sides is None else tied_sides[face.index]
+            if len(at) == 2 and all(sides.get(e.index) in tied for e in at) \
+                    and len({SIDES[sides[e.index]][0] for e in at}) == 2:
+                out.add((v, face.index))
+    return out
+
+
+def surface_corner_normals(part: Part, surfaces: list[BSplineSurface], pairs) -> dict:
+    """Unit normals ``(3,)`` of ``surfaces[face]`` at ``vertex`` for each ``(vertex, face)`` of ``pairs``
+    (taken at the end of the face's pcurve of an edge at the vertex)."""
+    out = {}
+    for v, k in pairs:
+        face = part.faces[k]
+        for use in face.uses:
+            edge = part.edges[use.edge]
+            if edge.degenerate or v not in edge.vertices or edge.vertices[0] == edge.vertices[1]:
+                continue
+            t_end = edge.curve.knots[0] if edge.vertices[0] == v else edge.curve.knots[-1]
+            uv = use.uv[int(np.argmin(np.abs(use.t - t_end)))]
+            n = surface_normals(surfaces[k], uv[:1], uv[1:])[0]
+            if np.isfinite(n).all():
+                out[(v, k)] = n
+            break
+    return out
+
+
+def _spread(normals: dict) -> float:
+    """Largest angle (degrees) between two of the normal lines in ``normals``."""
+    vals = list(normals.values())
+    return max((_line_angle(a, b) for i, a in enumerate(vals) for b in vals[i + 1:]), default=0.0)
+
+
+def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
+                    noise_deg: float = 1e-6, anchors: dict | None = None,
+                    decided: set[tuple[int, int]] | None = None) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
+    """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
+
+    Parameters
+    ----------
+    part : the hot part.
+    curves : the morphed curve of every edge (None for degenerate edges), same degrees, knots and weights.
+    edges : the hot part's tangent edges (:func:`tangent_edges`).
+    noise_deg : corners where the morph opened the angle between the faces by less than this are left alone.
+    anchors : ``{(vertex, face): unit normal (3,)}`` of faces whose normal at the vertex their edges do not
+        decide (a trimmed face, a face with a smooth boundary there), measured on their fitted surfaces:
+        the common plane is then theirs (their mean), and only the edges of faces in ``decided`` move.
+    decided : the ``(vertex, face)`` pairs whose normal the edges decide (:func:`edge_decided`); default:
+        every face with two edges meeting at a corner there.
+
+    At a vertex, the faces joined by tangent edges there form a cluster.  Its common plane has the normal
+    ``n_T``, the mean of the faces' normals (each the cross product of its two edges' tangents, oriented
+    alike), as eq. (63) averages two; tangents that cannot turn (an edge with two poles, a line) are removed
+    from ``n_T`` first.  Each edge that bounds a face of the cluster then has its pole next to the vertex
+    moved, by the least change, so that ``n_T . (P_1 - P_0) = 0``; an edge constrained at both ends solves
+    both conditions at once.  The end poles (the vertices) never move, so positions change by about the
+    kink angle times the first pole spacing.
+
+    Returns the curves (a new list; edges left alone keep their curve object) and one report per corrected
+    or examined vertex.
+    """
+    if len(curves) != len(part.edges):
+        raise ValueError(f"{len(part.edges)} edges but {len(curves)} curves")
+    hot_curves = [e.curve for e in part.edges]
+    constraints: dict[int, list[tuple[int, np.ndarray, float]]] = {}   # edge -> (pole, n_T, rhs)
+    pending = []
+    report_anchors: dict[int, dict] = {}
+    by_vertex: dict[int, list[TangentEdge]] = {}
+    for te in edges:
+        for v in set(part.edges[te.edge].vertices):
+            by_vertex.setdefault(v, []).append(te)
+    for v in sorted(by_vertex):
+        parent: dict[int, int] = {}
+
+        def root(k: int) -> int:
+            while parent.setdefault(k, k) != k:
+                k = parent[k]
+            return k
+
+        for te in by_vertex[v]:
+            parent[root(te.faces[0])] = root(te.faces[1])
+        clusters: dict[int, list[int]] = {}
+        for k in list(parent):
+            clusters.setdefault(root(k), []).append(k)
+        for faces in clusters.values():
+            faces = sorted(faces)
+            hot_n = _corner_normals(part, faces, v, hot_curves)
+            fixed_n = {k: anchors[(v, k)] for k in faces if anchors and (v, k) in anchors}
+            cold_n = _cluster_normals(part, faces, v, curves, fixed_n, decided)
+            for k, n in fixed_n.items():                  # hot normal of an anchored face, for orientation
+                hot_n.setdefault(k, n)
+            usable = sorted(set(hot_n) & set(cold_n))
+            hot_angle = _spread({k: hot_n[k] for k in usable})
+            before = _spread({k: cold_n[k] for k in usable})
+            report = dict(vertex=v, faces=tuple(faces), hot_angle=hot_angle, angle_before=before)
+            report_anchors[id(report)] = fixed_n
+            if len(usable) < 2:
+                pending.append((report, (), "fewer than two faces with two edges at the vertex"))
+                continue
+            if before - hot_angle <= noise_deg:
+                pending.append((report, (), "no kink added"))
+                continue
+            movable = [k for k in usable if k not in fixed_n]
+            if not movable:
+                pending.append((report, (), "no face's normal there is decided by its edges"))
+                continue
+            ref = hot_n[usable[0]]
+            n_t = sum(np.sign(np.dot(hot_n[k], ref)) * np.sign(np.dot(cold_n[k], hot_n[k])) * cold_n[k]
+                      for k in (sorted(fixed_n) or usable))
+            bounding = [e for e in part.edges if v in e.vertices and not e.degenerate
+                        and e.vertices[0] != e.vertices[1] and set(e.faces) & set(movable)]
+            # an edge of an anchored face stays (the face was fitted to it); a line cannot turn
+            stays = [e for e in bounding if curves[e.index].n_poles < 3 or set(e.faces) & set(fixed_n)]
+            fixed = [_unit(_end_tangent(curves[e.index], e.vertices[0] == v)) for e in stays]
+            if fixed:
+                basis, sing, _ = np.linalg.svd(np.array(fixed).T, full_matrices=False)
+                basis = basis[:, sing > np.sin(np.radians(_MIN_CORNER_DEG)) * sing[0]]
+                if basis.shape[1] >= 3:
+                    pending.append((report, (), "the edges' tangents at the vertex cannot turn"))
+                    continue
+                n_t = n_t - basis @ (basis.T @ n_t)
+            n_t = _unit(n_t)
+            if not np.isfinite(n_t).all():
+                pending.append((report, (), "no common plane"))
+                continue
+            moved = []
+            for e in bounding:
+                curve = curves[e.index]
+                if e in stays:
+                    continue
+                start = e.vertices[0] == v
+                pole = 1 if start else curve.n_poles - 2
+                constraints.setdefault(e.index, []).append((pole, n_t, -float(np.dot(n_t, _end_tangent(curve, start)))))
+                moved.append(e.index)
+            pending.append((report, tuple(moved), ""))
+
+    curves = list(curves)
+    for e, rows in constraints.items():
+        poles_at = sorted({pole for pole, _, _ in rows})
+        a = np.zeros((len(rows), 3 * len(poles_at)))
+        b = np.array([rhs for _, _, rhs in rows])
+        for r, (pole, n_t, _) in enumerate(rows):
+            j = poles_at.index(pole)
+            a[r, 3 * j:3 * j + 3] = n_t
+        delta = np.linalg.lstsq(a, b, rcond=None)[0].reshape(-1, 3)           # least change meeting all rows
+        poles = curves[e].poles.copy()
+        poles[poles_at] += delta
+        curves[e] = curves[e].with_poles(poles)
+
+    reports = []
+    for report, moved, reason in pending:
+        after_n = _cluster_normals(part, list(report["faces"]), report["vertex"], curves,
+                                   report_anchors[id(report)], decided)
+        after = _spread(after_n) if len(after_n) > 1 else report["angle_before"]
+        reports.append(CornerReport(**report, angle_after=after, edges=moved, reason=reason))
+        if not reason:
+            log.info("G1: vertex %d (faces %s): corner angle %.3g -> %.3g deg", report["vertex"],
+                     report["faces"], report["angle_before"], after)
+    return curves, reports
+
+
+def with_corners(part: Part, reports: list[G1Report], corners: list[CornerReport]) -> list[G1Report]:
+    """The edge reports with each edge's kink before correction raised to the corner angles measured at its
+    vertices before :func:`correct_corners` (the kink at an edge's ends is the angle at its corners)."""
+    before: dict[int, float] = {}
+    for c in corners:
+        before[c.vertex] = max(before.get(c.vertex, 0.0), c.angle_before)
+    out = []
+    for r in reports:
+        at_ends = [before[v] for v in part.edges[r.edge].vertices if v in before]
+        kb = max([r.kink_before_max, *at_ends]) if at_ends else r.kink_before_max
+        out.append(replace(r, kink_before_max=kb))
+    return out

@@ -1,7 +1,7 @@
 """The hot-to-cold morph, end to end, in the order of the paper.
 
-load -> classify nodes -> edges -> faces (with artificial nodes; refined to a tolerance if one is set)
--> G1 -> rebuild -> sew -> report
+load -> classify nodes -> edges (one tangent plane at the corners of tangent edges) -> faces (with
+artificial nodes; refined to a tolerance if one is set) -> G1 -> rebuild -> sew -> report
 """
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ from .edges import EdgeMorph, morph_edges, vertex_displacements
 from .errors import FieldError, MorphError
 from .faces import FaceMorph, morph_face, morph_faces
 from .field import DisplacementField, as_field
-from .g1 import correct_g1, kink_added, tangent_edges
+from .g1 import (correct_corners, correct_g1, edge_decided, kink_added, surface_corner_normals, tangent_edges,
+                 with_corners)
 from .invert import invert_field
 from .kernel.check import check_solids
 from .kernel.project import OUTSIDE, Projector
@@ -123,6 +124,13 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     estimator = FieldEstimator(cls.foot[used], field.displacements[used], settings.vertex_neighbours)
     vertex_disp = vertex_displacements(part, cls, field, estimator)
     edge_morphs = morph_edges(part, cls, field, vertex_disp, estimator, settings)
+    tangent = [] if settings.g1_angle is None else tangent_edges(part, settings.g1_angle)
+    corners = []
+    if tangent:
+        # The ends of tangent edges: one tangent plane per corner, on the edges the faces are then fitted to.
+        curves, corners = correct_corners(part, [e.curve for e in edge_morphs], tangent, _KINK_NOISE_DEG,
+                                          decided=edge_decided(part))
+        edge_morphs = [replace(e, curve=c) for e, c in zip(edge_morphs, curves)]
     lap("edges")
     report_progress("edges")
 
@@ -133,12 +141,12 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
                               trimmed_away=trimmed_away,
                               progress=lambda done, total: report_progress("faces", done, total))
     lap("faces")
+
+    def fit(face):
+        return morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away)
+
     refinements = []
     if settings.tolerance is not None:
-        def fit(refined):
-            return morph_face(refined, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                              trimmed_away)
-
         for k, face in enumerate(part.faces):
             face_morphs[k], refinement = refine_face(face, face_morphs[k], cls, field, settings.tolerance,
                                                      settings.max_refinements, fit)
@@ -146,11 +154,14 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
                 refinements.append(refinement)
         lap("refine")
     g1_reports = []
-    if settings.g1_angle is not None:
+    if tangent:
+        face_morphs, more = _anchored_corners(part, tangent, edge_morphs, face_morphs, fit)
+        corners += more
         surfaces = [f.surface for f in face_morphs]
-        kinked = [e for e in tangent_edges(part, settings.g1_angle)
-                  if kink_added(part, surfaces, e) > _KINK_NOISE_DEG]     # a morph that adds none moves none
+        kinked = [e for e in tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG
+                  or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
         surfaces, g1_reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
+        g1_reports = with_corners(part, g1_reports, corners)
         face_morphs = [replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)]
         lap("g1")
 
@@ -174,6 +185,27 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
                          part=part, classification=cls, faces=face_morphs, edges=edge_morphs)
     log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
     return result
+
+
+def _anchored_corners(part: Part, tangent, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph], fit):
+    """Corners of tangent edges where a face's normal is not decided by its edges (a trimmed face, a smooth
+    boundary): the other faces' edges there turn into that face's fitted tangent plane, and the faces of
+    the edges that moved are fitted again.  ``edge_morphs`` is updated in place; returns the face morphs
+    and the corner reports."""
+    decided = edge_decided(part, [f.tied_sides for f in face_morphs])
+    pairs = {(v, k) for te in tangent for v in part.edges[te.edge].vertices for k in te.faces} - decided
+    anchors = surface_corner_normals(part, [f.surface for f in face_morphs], pairs)
+    if not anchors:
+        return face_morphs, []
+    curves, corners = correct_corners(part, [e.curve for e in edge_morphs], tangent, _KINK_NOISE_DEG,
+                                      anchors, decided)
+    moved = {e for c in corners for e in c.edges}
+    for e in moved:
+        edge_morphs[e] = replace(edge_morphs[e], curve=curves[e])
+    # (a face refined to a tolerance keeps its fit: refitting would need its refined hot surface)
+    faces = [fit(face) if moved & {u.edge for u in face.uses} and face_morphs[k].surface.shape == face.surface.shape
+             else face_morphs[k] for k, face in enumerate(part.faces)]
+    return faces, corners
 
 
 def check_result(result: MorphResult) -> None:
