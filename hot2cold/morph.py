@@ -53,6 +53,9 @@ class MorphResult:
     hot : cadquery.Shape, the hot part in B-spline form, parameterised as the cold one.
     report : Report, accuracy and checks.
     part, classification, faces, edges : the intermediate records, for inspection.
+    field : DisplacementField, the field used (hot positions and hot-to-cold displacements, inverted if
+        asked).
+    node_errors : (N,) float array, each node's distance (mm) to the cold part (eq. 21); NaN where ignored.
     """
 
     cold: object
@@ -62,6 +65,8 @@ class MorphResult:
     classification: Classification
     faces: list[FaceMorph]
     edges: list[EdgeMorph]
+    field: DisplacementField
+    node_errors: np.ndarray
 
     def write_step(self, path: str | os.PathLike) -> None:
         """Write the cold part to a STEP file (atomically)."""
@@ -182,7 +187,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
                           g1=[asdict(r) for r in g1_reports])
     report_progress("report")
     result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
-                         part=part, classification=cls, faces=face_morphs, edges=edge_morphs)
+                         part=part, classification=cls, faces=face_morphs, edges=edge_morphs, field=field,
+                         node_errors=errors)
     log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
     return result
 
