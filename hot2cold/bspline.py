@@ -454,3 +454,84 @@ def insert_knots(surface: BSplineSurface, axis: int, knots) -> BSplineSurface:
     poles = homo[..., :3] / weights[..., None]
     return BSplineSurface(poles, flat if axis == 0 else surface.u_knots, surface.v_knots if axis == 0 else flat,
                           surface.u_degree, surface.v_degree, weights if rational else None)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Second derivatives and curvature (for the curvature pictures of the report, paper Fig. 9 and 11).
+# ----------------------------------------------------------------------------------------------------------
+
+def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
+    """Derivatives of the homogeneous surface ``A = sum w_ij N_i N_j (P_ij, 1)`` (non-rational: w = 1).
+
+    Returns ``[A, A_u, A_v, A_uu, A_uv, A_vv]``, each (m, 4): columns 0-2 the weighted point part, column 3
+    the weight function ``W`` and its derivatives.
+    """
+    u0, u1, v0, v1 = surface.domain
+    uu = _parameters(u, u0, u1, "u")
+    vv = _parameters(v, v0, v1, "v")
+    if uu.shape != vv.shape:
+        if uu.size == 1:
+            uu = np.full(vv.shape, uu[0])
+        elif vv.size == 1:
+            vv = np.full(uu.shape, vv[0])
+        else:
+            raise ValueError(f"u and v must have the same shape (m,) (or one be a scalar), got {uu.shape} "
+                             f"and {vv.shape}")
+    p, q = surface.u_degree, surface.v_degree
+    nu_, nv_ = surface.shape
+    su, bu = _span_rows(uu, surface.u_knots, p, 2)
+    sv, bv = _span_rows(vv, surface.v_knots, q, 2)
+    w = surface.weights if surface.weights is not None else np.ones((nu_, nv_))
+    homo = np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)        # (nu, nv, 4)
+    # The (p+1) x (q+1) block of homogeneous poles of each row: (m, p+1, q+1, 4).
+    iu = su[:, None] + np.arange(p + 1)
+    iv = sv[:, None] + np.arange(q + 1)
+    block = homo[iu[:, :, None], iv[:, None, :]]
+    out = []
+    for a, b in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)):
+        out.append(np.einsum("mi,mj,mijk->mk", bu[a], bv[b], block))
+    return out
+
+
+def _second_order(surface: BSplineSurface, u, v) -> tuple[np.ndarray, ...]:
+    """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (m, 3), by the quotient rule on the homogeneous form."""
+    a, a_u, a_v, a_uu, a_uv, a_vv = _homogeneous_derivatives(surface, u, v)
+    w, w_u, w_v, w_uu, w_uv, w_vv = (x[:, 3:4] for x in (a, a_u, a_v, a_uu, a_uv, a_vv))
+    s = a[:, :3] / w
+    s_u = (a_u[:, :3] - w_u * s) / w
+    s_v = (a_v[:, :3] - w_v * s) / w
+    s_uu = (a_uu[:, :3] - 2.0 * w_u * s_u - w_uu * s) / w
+    s_uv = (a_uv[:, :3] - w_u * s_v - w_v * s_u - w_uv * s) / w
+    s_vv = (a_vv[:, :3] - 2.0 * w_v * s_v - w_vv * s) / w
+    return s, s_u, s_v, s_uu, s_uv, s_vv
+
+
+def surface_second_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Second partial derivatives ``(S_uu, S_uv, S_vv)``, each (m, 3), at parameters ``u``, ``v`` (m,).
+
+    Rational surfaces are differentiated in homogeneous coordinates ``A = w S``:
+    ``S_uu = (A_uu - 2 W_u S_u - W_uu S) / W``, ``S_uv = (A_uv - W_u S_v - W_v S_u - W_uv S) / W``, and
+    likewise in v.  At a knot where the surface is only C1 (or C0) the derivative of the span on the
+    larger-parameter side is returned, as for :func:`surface_derivatives`.
+    """
+    return _second_order(surface, u, v)[3:]
+
+
+def mean_curvature(surface: BSplineSurface, u, v) -> np.ndarray:
+    """Mean curvature ``H`` (m,) in 1/mm at parameters ``u``, ``v`` (m,).
+
+    ``H = (L G - 2 M F + N E) / (2 (E G - F^2))`` with the first (``E, F, G``) and second (``L, M, N``,
+    against the unit normal ``S_u x S_v / |S_u x S_v|``) fundamental forms; with that normal a sphere whose
+    normal points outward has ``H = -1/R`` (the kernel's ``GeomLProp_SLProps`` sign).  NaN where the normal
+    is undefined (see :func:`surface_normals`).
+    """
+    _, s_u, s_v, s_uu, s_uv, s_vv = _second_order(surface, u, v)
+    normal = surface_normals(surface, u, v)
+    e = np.einsum("ij,ij->i", s_u, s_u)
+    f = np.einsum("ij,ij->i", s_u, s_v)
+    g = np.einsum("ij,ij->i", s_v, s_v)
+    l_ = np.einsum("ij,ij->i", s_uu, normal)
+    m_ = np.einsum("ij,ij->i", s_uv, normal)
+    n_ = np.einsum("ij,ij->i", s_vv, normal)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (l_ * g - 2.0 * m_ * f + n_ * e) / (2.0 * (e * g - f * f))
