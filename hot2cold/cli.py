@@ -1,19 +1,24 @@
 """The ``hot2cold`` command line.  The only module that talks to the terminal.
 
-    hot2cold morph HOT.step FIELD.csv -o COLD.step --report REPORT.json
+    hot2cold morph HOT.step FIELD.csv -o COLD.step --report REPORT.json [--vtu NODES.vtu] [--stl COLD.stl]
+        [--glb COLD.glb] [--html REPORT.html [--scale FACTOR]] [-q | -v]
 
-Exit codes: 0 success; 2 unusable input (file, field, option); 3 kernel failure; 4 the cold part is not a
-valid closed solid (nothing written); 5 written, but --tolerance not met; 70 internal error; 130
-interrupted.
+Every output is checked before the morph starts (its folder exists and is writable, it is neither input
+nor another output) and written whole or not at all.
+
+Exit codes: 0 success; 2 unusable input (file, field, option, output path); 3 kernel failure; 4 the cold
+part is not a valid closed solid (nothing written but the report); 5 written, but --tolerance not met;
+6 an output could not be written (none of it is left; the message says what else is written); 70
+internal error; 130 interrupted.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 from . import __version__
@@ -48,6 +53,21 @@ def _parser() -> argparse.ArgumentParser:
                    help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     m.add_argument("--edge-distance", type=float, metavar="MM",
                    help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
+    views = m.add_argument_group("viewer exports (written after the cold STEP)")
+    views.add_argument("--vtu", type=Path, metavar="NODES.vtu",
+                       help="for ParaView: two files, NODES.vtu = the FE nodes at their hot positions with point "
+                       "data displacement (hot to cold, mm), error (mm, NaN where ignored), role (-1 ignored, 0 "
+                       "face, 1 edge, 2 vertex) and owner (its face/edge/vertex), and NODES_surface.vtu = the "
+                       "cold surface as triangles with cell data face and point data displacement (hot to cold) "
+                       "and uv. Two files, not two cell blocks of one, because VTU point data covers every "
+                       "point of a file: the nodes' error would otherwise paint the surface NaN. Warp By Vector "
+                       "(displacement) takes the nodes onto the cold surface")
+    views.add_argument("--stl", type=Path, metavar="PATH", help="the cold part as a binary STL (mm)")
+    views.add_argument("--glb", type=Path, metavar="PATH",
+                       help="the cold part as binary glTF (metres, Y up, as glTF viewers expect)")
+    views.add_argument("--html", type=Path, metavar="PATH", help="a self-contained HTML report with pictures")
+    views.add_argument("--scale", type=float, metavar="FACTOR",
+                       help="displacement magnification of the --html pictures (default: chosen by the report)")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     m.add_argument("-v", "--verbose", action="store_true", help="log each step")
     return parser
@@ -71,35 +91,105 @@ class _Progress:
         self.stream.flush()
 
 
-def _check_output(hot: Path, output: Path, what: str) -> None:
-    if output.exists() and hot.exists() and output.resolve() == hot.resolve():
-        raise InputError(f"{what} {output} is the input file: choose another name")
+def _check_output(inputs, output: Path, what: str) -> None:
+    """Refuse ``output`` before the long run: it is one of ``inputs`` (a path or paths), or its folder is
+    missing or not writable."""
+    for given in [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs:
+        if given is not None and output.exists() and Path(given).exists() and \
+                output.resolve() == Path(given).resolve():
+            raise InputError(f"{what} {output} is the input file: choose another name")
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():
         raise InputError(f"folder for {what} {output} does not exist: create it first")
     if not os.access(folder, os.W_OK):
         raise InputError(f"folder for {what} {output} is not writable")
+    if output.is_dir():
+        raise InputError(f"{what} {output} is a folder: give a file name")
+
+
+def _outputs(args) -> list[tuple[str, Path]]:
+    """Every file the run will write, as (what, path)."""
+    from .export import surface_path
+
+    out = [("output", args.output)]
+    if args.report:
+        out.append(("report", args.report))
+    if args.vtu:
+        out += [("--vtu", args.vtu), ("--vtu surface", surface_path(args.vtu))]
+    out += [(f"--{name}", getattr(args, name)) for name in ("stl", "glb", "html") if getattr(args, name)]
+    return out
+
+
+def _check_outputs(args) -> None:
+    seen: dict[Path, str] = {}
+    for what, path in _outputs(args):
+        _check_output((args.hot, args.field), path, what)
+        key = path.resolve()
+        if key in seen:
+            raise InputError(f"{what} and {seen[key]} are the same file {path}: choose another name")
+        seen[key] = what
+
+
+def _check_options(args) -> None:
+    if args.scale is not None:
+        if not args.html:
+            raise InputError("--scale magnifies the --html pictures: give --html too")
+        if not (math.isfinite(args.scale) and args.scale > 0):
+            raise InputError(f"--scale must be a positive number, got {args.scale}")
+
+
+def _html_writer():
+    """``write_html`` of :mod:`hot2cold.html_report`, or an :class:`InputError` if it cannot be imported."""
+    try:
+        from .html_report import write_html
+    except ImportError as exc:
+        raise InputError(f"--html is not available in this installation: {exc}") from exc
+    return write_html
 
 
 def _write_json_atomically(data: dict, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+    from .export import write_atomically
+
+    def write(tmp: str) -> None:
+        with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(data, fh, indent=2)
             fh.write("\n")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    write_atomically([(path, write)])
+
+
+def _write_exports(args, result) -> list[Path]:
+    """Write the viewer exports asked for; returns the paths written."""
+    from . import export
+
+    written: list[Path] = []
+    surface = None
+    if args.vtu or args.stl or args.glb:
+        log.info("triangulating the cold part for the viewer exports")
+        surface = export.cold_surface(result)
+    if args.vtu:
+        written += export.write_vtu(result, args.vtu, surface)
+    if args.stl:
+        written.append(export.write_stl(result, args.stl, surface))
+    if args.glb:
+        written.append(export.write_glb(result, args.glb, surface))
+    if args.html:
+        write_html = _html_writer()
+        export.write_atomically([(args.html, lambda tmp: write_html(result, tmp, scale=args.scale))])
+        log.info("wrote %s", args.html)
+        written.append(args.html)
+    return written
 
 
 def _morph(args) -> int:
+    from .export import OutputError
     from .morph import check_result, morph
     from .settings import Settings
 
-    _check_output(args.hot, args.output, "output")
-    if args.report:
-        _check_output(args.hot, args.report, "report")
+    _check_outputs(args)
+    _check_options(args)
+    if args.html:
+        _html_writer()
     try:
         settings = Settings(node_distance=args.node_distance, edge_distance=args.edge_distance,
                             tolerance=args.tolerance)
@@ -111,11 +201,25 @@ def _morph(args) -> int:
     if not args.quiet:
         print(result.report.table())
     if args.report:
-        _write_json_atomically(result.report.to_dict(), args.report)
+        try:
+            _write_json_atomically(result.report.to_dict(), args.report)
+        except OutputError as exc:
+            raise OutputError(f"{exc} (nothing written)") from exc
     check_result(result)
-    result.write_step(args.output)
+    try:
+        result.write_step(args.output)
+    except OSError as exc:
+        raise OutputError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+    written = [args.output]
     if not args.quiet:
         print(f"wrote {args.output}")
+    try:
+        for path in _write_exports(args, result):
+            written.append(path)
+            if not args.quiet:
+                print(f"wrote {path}")
+    except OutputError as exc:
+        raise OutputError(f"{exc} ({', '.join(map(str, written))} written)") from exc
     if result.report.tolerance_met is False:
         print(f"hot2cold: tolerance {args.tolerance} mm not met (Δmax {result.report.delta_max:.3g} mm); "
               f"the cold part is written", file=sys.stderr)
@@ -126,8 +230,23 @@ def _morph(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``hot2cold`` console script; returns the exit code."""
     args = _parser().parse_args(argv)
-    level = logging.INFO if args.verbose else logging.WARNING
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    # The package's loggers go to this run's stderr: -q errors only, -v every step.
+    level = logging.ERROR if args.quiet else logging.INFO if args.verbose else logging.WARNING
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    saved = log.level, log.propagate
+    log.addHandler(handler)
+    log.setLevel(level)
+    log.propagate = False
+    try:
+        return _run(args)
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(saved[0])
+        log.propagate = saved[1]
+
+
+def _run(args) -> int:
     try:
         return _morph(args)
     except Hot2ColdError as exc:
