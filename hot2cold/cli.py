@@ -158,27 +158,27 @@ def _write_json_atomically(data: dict, path: Path) -> None:
     write_atomically([(path, write)])
 
 
-def _write_exports(args, result) -> list[Path]:
-    """Write the viewer exports asked for; returns the paths written."""
+def _write_exports(args, result):
+    """Write the viewer exports asked for, yielding each path as soon as it is written."""
     from . import export
 
-    written: list[Path] = []
     surface = None
     if args.vtu or args.stl or args.glb:
         log.info("triangulating the cold part for the viewer exports")
         surface = export.cold_surface(result)
     if args.vtu:
-        written += export.write_vtu(result, args.vtu, surface)
+        yield from export.write_vtu(result, args.vtu, surface)
     if args.stl:
-        written.append(export.write_stl(result, args.stl, surface))
+        yield export.write_stl(result, args.stl, surface)
     if args.glb:
-        written.append(export.write_glb(result, args.glb, surface))
+        yield export.write_glb(result, args.glb, surface)
     if args.html:
         write_html = _html_writer()
-        export.write_atomically([(args.html, lambda tmp: write_html(result, tmp, scale=args.scale))])
-        log.info("wrote %s", args.html)
-        written.append(args.html)
-    return written
+        try:
+            write_html(result, args.html, scale=args.scale)     # atomic itself
+        except OSError as exc:
+            raise export.OutputError(f"cannot write {args.html}: {exc.strerror or exc}") from exc
+        yield args.html
 
 
 def _morph(args) -> int:
