@@ -1,0 +1,261 @@
+"""The morph report as one self-contained HTML page: tables and pictures, images inlined as base64 PNG.
+
+    write_html(result, "report.html")
+
+The page holds the paper-style table per face and per edge (FE nodes, control points, Δmax, Δmean; the
+kink before and after the G1 correction on tangent edges), the overall checks (validity, free edges,
+volumes hot and cold, nodes used and ignored), the tolerance and refinements, and the pictures of
+:mod:`hot2cold.visual`.  It loads nothing from anywhere: no scripts, no style sheets, no image files.
+"""
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import logging
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from . import __version__
+from . import visual
+
+log = logging.getLogger(__name__)
+
+_STYLE = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 1.5em auto;
+       max-width: 1250px; padding: 0 1em; color: #222; line-height: 1.4; }
+h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; margin-top: 1.6em;
+     border-bottom: 1px solid #ccc; padding-bottom: 0.2em; }
+table { border-collapse: collapse; margin: 0.5em 0 1em 0; font-size: 0.9em; }
+th, td { border: 1px solid #d0d0d0; padding: 0.2em 0.6em; text-align: right; }
+th { background: #f0f0f0; } td.l, th.l { text-align: left; }
+tr:nth-child(even) td { background: #fafafa; }
+.ok { color: #1a7f37; font-weight: 600; } .bad { color: #c62828; font-weight: 600; }
+.muted { color: #777; } figure { margin: 1em 0 2em 0; } figure img { max-width: 100%; height: auto;
+border: 1px solid #e0e0e0; } figcaption { font-size: 0.9em; color: #444; margin-top: 0.3em; }
+dl.summary { display: grid; grid-template-columns: max-content auto; gap: 0.15em 1.2em; }
+dl.summary dt { font-weight: 600; } dl.summary dd { margin: 0; }
+"""
+
+
+def _e(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _mm(x, fmt: str = ".2e") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return format(x, fmt)
+
+
+def _deg(x) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return f"{x:.3g}°"
+
+
+def _flag(ok: bool, yes: str, no: str) -> str:
+    return f'<span class="ok">{_e(yes)}</span>' if ok else f'<span class="bad">{_e(no)}</span>'
+
+
+def _table(head: list[str], rows: list[list[str]], left: set[int] = frozenset(), cls: str = "") -> str:
+    """Cells are HTML already (escape before)."""
+    th = "".join(f'<th{" class=l" if i in left else ""}>{h}</th>' for i, h in enumerate(head))
+    body = "\n".join("<tr>" + "".join(f'<td{" class=l" if i in left else ""}>{c}</td>' for i, c in enumerate(r))
+                     + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{th}</tr></thead>\n<tbody>\n{body}\n</tbody></table>'
+
+
+def _img(png: bytes, alt: str) -> str:
+    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+
+
+def _summary(report) -> str:
+    items = [
+        ("hot part", _e(report.hot or "–")),
+        ("field", _e(report.field or "–")),
+        ("cold part", _flag(report.valid, "valid", "INVALID") + ", "
+         + _flag(report.free_edges == 0, "closed", f"{report.free_edges} free edges")),
+        ("Δmax / Δmean", f"{_mm(report.delta_max)} mm / {_mm(report.delta_mean)} mm"),
+        ("largest displacement", f"{report.max_displacement:.4g} mm"),
+    ]
+    if report.tolerance is not None:
+        items.append(("tolerance", f"{report.tolerance:.3g} mm: "
+                      + _flag(bool(report.tolerance_met), "met", "NOT met")))
+    return '<dl class="summary">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+
+
+def _face_table(report) -> str:
+    several = len(report.solids) > 1                    # the solid column only when there is a choice
+    rows = []
+    for f in report.faces:
+        rows.append([str(f.index), *([str(f.solid)] if several else []), str(f.nodes), _e(f.control_points),
+                     _mm(f.delta_max), _mm(f.delta_mean), str(f.artificial_nodes), f"{f.rank}/{f.unknowns}",
+                     _mm(f.condition, ".2g"), _e(" ".join(f.tied_sides) or "–")])
+    head = ["face", *(["solid"] if several else []), "FE nodes", "control points", "Δmax [mm]", "Δmean [mm]",
+            "artificial nodes", "rank / unknowns", "condition", "sides tied to edges"]
+    return _table(head, rows, left={len(head) - 1}, cls="faces")
+
+
+def _edge_table(report) -> str:
+    g1 = {g["edge"]: g for g in report.g1}
+    rows = []
+    for e in report.edges:
+        g = g1.get(e.index)
+        if g is None:
+            kink = ["–", "–", "–"]
+        else:
+            kink = [_deg(g["kink_before_max"]), _deg(g["kink_after_max"]),
+                    "corrected" if g["corrected"] else _e(g["reason"] or "not corrected")]
+        rows.append([str(e.index), _e(" ".join(map(str, e.faces))), str(e.nodes), str(e.control_points),
+                     _mm(e.delta_max), _mm(e.delta_mean), _mm(e.gap), *kink])
+    return _table(["edge", "faces", "FE nodes", "control points", "Δmax [mm]", "Δmean [mm]",
+                   "gap to faces [mm]", "kink before", "kink after", "G1"], rows, left={1, 9}, cls="edges")
+
+
+def _checks(report) -> str:
+    rows = []
+    for s in report.solids:
+        change = (s.volume_cold - s.volume_hot) / s.volume_hot * 100 if s.volume_hot else float("nan")
+        rows.append([str(s.index), str(s.faces), _flag(s.valid, "valid", "INVALID"),
+                     _flag(s.closed, "0", str(s.free_edges)), f"{s.volume_hot:.6g}", f"{s.volume_cold:.6g}",
+                     _mm(change, "+.4f")])
+    solids = _table(["solid", "faces", "validity", "free edges", "volume hot [mm³]", "volume cold [mm³]",
+                     "change [%]"], rows)
+    nodes = _table(["FE nodes", "used", "on faces", "on edges", "on vertices", "ignored"],
+                   [[str(report.nodes_total), str(report.nodes_used), str(report.nodes_on_faces),
+                     str(report.nodes_on_edges), str(report.nodes_on_vertices), str(report.nodes_ignored)]])
+    notes = [f"Nodes farther than {report.node_distance:.3g} mm from every face are ignored; nodes within "
+             f"{report.edge_distance:.3g} mm of an edge feed the edge.",
+             f"Largest error at a vertex: {_mm(report.vertex_delta_max)} mm."]
+    if report.inversion:
+        notes.append(f"The field was inverted (cold to hot) in {report.inversion['iterations']} fixed-point "
+                     f"iterations, residual {report.inversion['residual']:.2e} mm.")
+    return solids + nodes + "".join(f"<p>{_e(n)}</p>" for n in notes)
+
+
+def _tolerance(report) -> str:
+    parts = []
+    if report.tolerance is None:
+        parts.append("<p>No tolerance was set: faces keep their hot control nets (no refinement).</p>")
+    else:
+        parts.append(f"<p>Tolerance {report.tolerance:.3g} mm: "
+                     f"{_flag(bool(report.tolerance_met), 'met', 'NOT met')} "
+                     f"(largest Δmax {_mm(report.delta_max)} mm).</p>")
+    if report.refinements:
+        rows = []
+        for r in report.refinements:
+            if r["rounds"] == 0:
+                rows.append([str(r["face"]), _e(r["net_before"]), _e(r["net_after"]), "0", "0", "0",
+                             _mm(r["residual"]), "cannot be refined: the rows to lengthen are tied to edges"])
+            else:
+                rows.append([str(r["face"]), _e(r["net_before"]), _e(r["net_after"]), str(r["knots_added_u"]),
+                             str(r["knots_added_v"]), str(r["rounds"]), _mm(r.get("residual")), "refined"])
+        parts.append(_table(["face", "net before", "net after", "knots +u", "knots +v", "rounds",
+                             "fit residual [mm]", ""], rows, left={7}))
+    return "".join(parts)
+
+
+def _g1(report) -> str:
+    if not report.g1:
+        return "<p>No tangent (G1) edges, or the G1 correction was switched off.</p>"
+    before = max((g["kink_before_max"] for g in report.g1), default=0.0)
+    after = max((g["kink_after_max"] for g in report.g1), default=0.0)
+    fixed = sum(bool(g["corrected"]) for g in report.g1)
+    rows = [[str(g["edge"]), _e(" ".join(map(str, g["faces"]))), _deg(g["hot_angle_max"]),
+             _deg(g["kink_before_max"]), _deg(g["kink_after_max"]),
+             "yes" if g["corrected"] else _e(g["reason"] or "no")] for g in report.g1]
+    return (f"<p>{len(report.g1)} tangent edges, {fixed} corrected; largest kink before "
+            f"{_deg(before)}, after {_deg(after)} (the angle between the two faces' normals along the edge, "
+            f"paper section 5).</p>"
+            + _table(["edge", "faces", "hot angle", "kink before", "kink after", "corrected"], rows, left={1, 5}))
+
+
+def _timings(report) -> str:
+    if not report.timings:
+        return ""
+    cells = ", ".join(f"{_e(k)} {v:.2f} s" for k, v in report.timings.items())
+    return f'<p class="muted">Morph timings: {cells}.</p>'
+
+
+def render_html(result, scale: float | None = None) -> str:
+    """The report page of ``result`` (a :class:`~hot2cold.morph.MorphResult`) as a string.
+
+    ``scale`` exaggerates the displacement in the overlay picture (default
+    :func:`hot2cold.visual.displacement_scale`: the largest displacement drawn as 5 % of the part's size).
+    """
+    report = result.report
+    scale = visual.displacement_scale(result) if scale is None else visual._check_scale(scale)
+    clock = time.perf_counter()
+    mesh = visual.mesh_of(result)
+    overlay = visual.overlay_png(result, scale, mesh=mesh)
+    error_faces = visual.error_faces(result)
+    errors = visual.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
+    curv_faces = visual.curvature_faces(result, mesh=mesh)
+    curvature = visual.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
+    log.info("pictures drawn in %.2f s", time.perf_counter() - clock)
+
+    largest = report.max_displacement
+    figures = [
+        f'<figure>{_img(overlay, "hot and cold part overlaid")}<figcaption>Figure 1. Hot part (red) and cold '
+        f'part (blue) overlaid, as in the paper\'s Fig. 8 and 10. The displacement is drawn '
+        f'<b>{scale:.3g} times</b> its size: the largest displacement, {largest:.4g} mm, appears as '
+        f'{largest * scale:.4g} mm (part diagonal {result.part.diagonal:.4g} mm). Faces are translucent, '
+        f'edges drawn as lines.</figcaption></figure>']
+    if errors is not None:
+        left_out = len([f for f in report.faces if f.nodes > 0]) - len(error_faces)
+        more = f" {left_out} faces with fewer nodes are not drawn." if left_out > 0 else ""
+        figures.append(
+            f'<figure>{_img(errors, "per-face error maps")}<figcaption>Figure 2. Per face, each FE node '
+            f"coloured by its distance to the cold part (eq. 21, mm); circles are the face's nodes, diamonds "
+            f"the nodes of its edges, the grey area is the trimmed face, in its parameters scaled to mm along "
+            f"the surface. Each face has its own colour scale.{_e(more)}</figcaption></figure>")
+    if curvature is not None:
+        figures.append(
+            f'<figure>{_img(curvature, "mean curvature hot and cold")}<figcaption>Figure 3. Mean curvature '
+            f"H (1/mm) of the hot and the morphed surface of the largest faces ({_e(', '.join(map(str, curv_faces)))}), "
+            f"as in the paper's Fig. 9 and 11, and their difference; hot and cold share one colour scale "
+            f"(1–99 % of the values). A smooth difference means the morph added no wiggles."
+            f"</figcaption></figure>")
+
+    now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    title = f"hot2cold report: {Path(report.hot).name if report.hot else 'morph'}"
+    body = [
+        f"<h1>{_e(title)}</h1>",
+        f'<p class="muted">hot2cold {_e(__version__)}, {_e(now)}. Method: GT2014-26683 (hot-to-cold '
+        f"B-spline morphing; only control points move).</p>",
+        _summary(report),
+        "<h2>Faces</h2>", _face_table(report),
+        "<h2>Edges</h2>", _edge_table(report),
+        "<h2>Checks</h2>", _checks(report),
+        "<h2>Tolerance and refinement</h2>", _tolerance(report),
+        "<h2>G1 continuity</h2>", _g1(report),
+        "<h2>Pictures</h2>", *figures,
+        _timings(report),
+    ]
+    return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+            f"<title>{_e(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
+            + "\n".join(body) + "\n</body>\n</html>\n")
+
+
+def write_html(result, path: str | os.PathLike, scale: float | None = None) -> None:
+    """Write the report page of ``result`` to ``path`` atomically (a temporary file in the same folder,
+    then ``os.replace``): a reader sees the old file or the whole new one, never a part.
+
+    Raises ValueError for a non-positive ``scale``; OSError when the folder cannot be written.
+    """
+    path = Path(path)
+    text = render_html(result, scale)
+    folder = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    log.info("wrote %s (%.0f kB)", path, len(text.encode("utf-8")) / 1024)

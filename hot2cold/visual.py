@@ -1,0 +1,485 @@
+"""Pictures of a morph for the HTML report: PNG bytes made with matplotlib's object interface.
+
+* :func:`overlay_png` -- hot (red) and cold (blue) part overlaid, the displacement exaggerated by a stated
+  factor so it can be seen (the paper's Fig. 8 and 10);
+* :func:`error_maps_png` -- per face, the FE nodes coloured by their distance to the cold part (eq. 21);
+* :func:`curvature_png` -- mean curvature of the hot and the morphed surfaces side by side, and their
+  difference, on the largest faces (the paper's Fig. 9 and 11).
+
+Only :class:`matplotlib.figure.Figure` and the Agg canvas are used: no pyplot, no backend switching, so
+nothing global changes.  Every picture is drawn from one triangle mesh of the hot part
+(:func:`hot2cold.kernel.tessellate.tessellate`); because the morph keeps each face's parameterisation, a
+mesh vertex at ``(u, v)`` on face ``k`` is at ``S_cold(u, v)`` on the cold part, so hot, cold and anything
+in between share one mesh.
+
+Maps of a face are drawn in its *developed* parameters: ``u`` and ``v`` scaled by the median lengths of
+``S_u`` and ``S_v`` over the face, so both axes read as approximate millimetres along the surface.
+"""
+from __future__ import annotations
+
+import io
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.colors import Normalize, TwoSlopeNorm
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+from matplotlib.ticker import FuncFormatter
+
+from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, mean_curvature, surface_derivatives
+from .classify import EDGE, FACE
+from .kernel.tessellate import TriangleMesh, tessellate
+
+log = logging.getLogger(__name__)
+
+#: Colours of the hot and the cold part (the paper's red and blue).
+HOT_COLOUR = (0.84, 0.15, 0.16)
+COLD_COLOUR = (0.12, 0.30, 0.80)
+
+#: Default exaggeration: the largest displacement is drawn as this fraction of the part's diagonal.
+DISPLACEMENT_FRACTION = 0.05
+
+_EDGE_SAMPLES = 64
+
+
+# ------------------------------------------------------------------------------------------------- helpers
+def mesh_of(result, deflection: float | None = None) -> TriangleMesh:
+    """The triangle mesh of the hot part that every picture is drawn on (pass it on to draw several)."""
+    if deflection is None:
+        deflection = 1e-3 * result.part.diagonal
+    return tessellate(result.hot.wrapped, deflection)
+
+
+def displacement_scale(result, fraction: float = DISPLACEMENT_FRACTION) -> float:
+    """Exaggeration factor that draws the largest displacement as ``fraction`` of the part's diagonal
+    (1 when nothing moves)."""
+    largest = float(result.report.max_displacement)
+    if not np.isfinite(largest) or largest <= 0.0:
+        return 1.0
+    return fraction * float(result.part.diagonal) / largest
+
+
+def _png(fig: Figure, dpi: int) -> bytes:
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
+    u0, u1, v0, v1 = surface.domain
+    return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
+
+
+def _check_scale(scale: float) -> float:
+    scale = float(scale)
+    if not np.isfinite(scale) or scale <= 0.0:
+        raise ValueError(f"the displacement scale must be a positive number, got {scale!r}")
+    return scale
+
+
+def _face_vertices(mesh: TriangleMesh, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex indices ``(n,)`` of face ``k`` and its triangles ``(m, 3)`` renumbered into them."""
+    tris = mesh.triangles[mesh.face == k]
+    verts, local = np.unique(tris, return_inverse=True)
+    return verts, local.reshape(tris.shape)
+
+
+def _cold_vertices(result, mesh: TriangleMesh) -> np.ndarray:
+    """Each mesh vertex moved onto the cold part: ``S_cold(u, v)`` of its face (same parameters as hot)."""
+    cold = mesh.vertices.copy()
+    for k, fm in enumerate(result.faces):
+        verts, _ = _face_vertices(mesh, k)
+        if len(verts):
+            uv = _clip_uv(fm.surface, mesh.uv[verts])
+            cold[verts] = evaluate_surface(fm.surface, uv[:, 0], uv[:, 1])
+    return cold
+
+
+def _edge_polylines(result) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Hot and cold polylines ``(s, 3)`` of every non-degenerate edge, at the same curve parameters."""
+    hot, cold = [], []
+    for edge, em in zip(result.part.edges, result.edges):
+        if edge.curve is None or em.curve is None:
+            continue
+        lo, hi = edge.curve.domain
+        t = np.linspace(lo, hi, _EDGE_SAMPLES)
+        hot.append(evaluate_curve(edge.curve, t))
+        cold.append(evaluate_curve(em.curve, t))
+    return hot, cold
+
+
+@dataclass(frozen=True)
+class _Developed:
+    """Map of a face's ``(u, v)`` to approximate millimetres along the surface."""
+
+    u0: float
+    v0: float
+    lu: float
+    lv: float
+
+    @classmethod
+    def of(cls, surface: BSplineSurface, uv: np.ndarray) -> "_Developed":
+        su, sv = surface_derivatives(surface, uv[:, 0], uv[:, 1])
+        lu = float(np.median(np.linalg.norm(su, axis=1))) if len(uv) else 1.0
+        lv = float(np.median(np.linalg.norm(sv, axis=1))) if len(uv) else 1.0
+        lu, lv = (lu if lu > 0 else 1.0), (lv if lv > 0 else 1.0)
+        return cls(float(uv[:, 0].min()), float(uv[:, 1].min()), lu, lv)
+
+    def xy(self, uv: np.ndarray) -> np.ndarray:
+        return np.column_stack([(uv[:, 0] - self.u0) * self.lu, (uv[:, 1] - self.v0) * self.lv])
+
+    def uv(self, xy: np.ndarray) -> np.ndarray:
+        return np.column_stack([xy[:, 0] / self.lu + self.u0, xy[:, 1] / self.lv + self.v0])
+
+
+def _set_aspect(ax, xy: np.ndarray) -> None:
+    """Equal axes unless the face is a long strip (then it is stretched to stay readable)."""
+    ext = np.ptp(xy, axis=0) if len(xy) else np.ones(2)
+    ratio = ext[0] / ext[1] if ext[1] > 0 else np.inf
+    ax.set_aspect("equal" if 1 / 3 <= ratio <= 3 else "auto")
+
+
+def _face_areas(mesh: TriangleMesh, n_faces: int) -> np.ndarray:
+    v = mesh.vertices[mesh.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    return np.bincount(mesh.face, weights=area, minlength=n_faces)
+
+
+def _grid(n: int, columns: int) -> tuple[int, int]:
+    cols = max(1, min(columns, n))
+    return (n + cols - 1) // cols, cols
+
+
+_SMALL = FuncFormatter(lambda x, _pos: f"{x:.2g}")
+
+
+# ------------------------------------------------------------------------------------------------ overlay
+@dataclass(frozen=True)
+class View:
+    """An orthographic view: looking along ``direction``, with ``up`` pointing up on the picture."""
+
+    name: str
+    direction: np.ndarray
+    up: np.ndarray
+
+    def basis(self) -> np.ndarray:
+        """Rows: right, up, towards the viewer."""
+        d = np.asarray(self.direction, float)
+        d = d / np.linalg.norm(d)
+        up = np.asarray(self.up, float) - np.dot(self.up, d) * d
+        up = up / np.linalg.norm(up)
+        return np.array([np.cross(d, up), up, -d])
+
+
+def default_views(points: np.ndarray) -> list[View]:
+    """Three views along the principal axes of ``points``: along the thinnest axis (the part seen
+    flat), the middle one and the longest one."""
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred[:: max(1, len(centred) // 20000)], full_matrices=False)
+    axes = []
+    for a in vt:                                   # deterministic signs: largest component positive
+        axes.append(a if a[np.argmax(np.abs(a))] > 0 else -a)
+    e1, e2, e3 = axes
+    return [View("thinnest axis", -e3, e2), View("middle axis", -e2, e3), View("longest axis", -e1, e2)]
+
+
+def _direction_text(d: np.ndarray) -> str:
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    return "(" + ", ".join(f"{x:+.2f}" for x in d) + ")"
+
+
+def _shaded_layer(points: np.ndarray, triangles: np.ndarray, basis: np.ndarray, colour, box, size_px) -> np.ndarray:
+    """One part rendered opaque (flat-shaded triangles, far ones first) into an RGBA image ``(h, w, 4)``
+    covering ``box = (x0, x1, y0, y1)`` of the view; transparent where the part is not."""
+    p = points @ basis.T                                               # x, y, towards the viewer
+    tri = p[triangles]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    light = np.array([-0.35, 0.45, 0.82])
+    shade = 0.35 + 0.65 * np.abs(normal @ (light / np.linalg.norm(light)))
+    rgb = np.clip(np.outer(shade, colour), 0.0, 1.0)
+    order = np.argsort(tri[:, :, 2].mean(axis=1))                    # painter's algorithm: far first
+    w, h = size_px
+    fig = Figure(figsize=(w / 100.0, h / 100.0), dpi=100)
+    fig.patch.set_alpha(0.0)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_axis_off()
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.add_collection(PolyCollection(tri[order, :, :2], facecolors=rgb[order], edgecolors=rgb[order],
+                                     linewidths=0.4))
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba(), dtype=float)[..., :4] / 255.0
+
+
+def _composite(layers: list[np.ndarray], opacity: float) -> np.ndarray:
+    """White background, each opaque layer laid over it with ``opacity``; where layers overlap their colours
+    are averaged, so neither part hides the other."""
+    alphas = [layer[..., 3:4] for layer in layers]
+    total = np.maximum(sum(alphas), 1e-12)
+    mixed = sum(layer[..., :3] * a for layer, a in zip(layers, alphas)) / total
+    cover = np.clip(sum(alphas), 0.0, 1.0) * opacity
+    return np.concatenate([1.0 - cover + cover * mixed, np.ones_like(cover)], axis=2)
+
+
+def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None = None,
+                views: list[View] | None = None, width_in: float = 14.0, dpi: int = 100,
+                opacity: float = 0.55) -> bytes:
+    """Hot part (red) and cold part (blue) overlaid, from several orthographic views.
+
+    The cold part is drawn as ``hot + scale * (cold - hot)`` (default scale: :func:`displacement_scale`).
+    Each part is rendered shaded and laid over the other translucently (purple where they overlap), and the
+    edges of both are drawn on top as lines.  Returns PNG bytes.
+    """
+    scale = displacement_scale(result) if scale is None else _check_scale(scale)
+    mesh = mesh if mesh is not None else mesh_of(result)
+    hot = mesh.vertices
+    cold = hot + scale * (_cold_vertices(result, mesh) - hot)
+    hot_edges, cold_edges = _edge_polylines(result)
+    cold_edges = [h + scale * (c - h) for h, c in zip(hot_edges, cold_edges)]
+    views = views if views is not None else default_views(hot)
+
+    boxes, bases = [], []
+    for view in views:
+        b = view.basis()
+        allp = np.concatenate([hot @ b[:2].T, cold @ b[:2].T])
+        lo, hi = allp.min(axis=0), allp.max(axis=0)
+        pad = 0.04 * float(max(hi - lo))
+        boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
+        bases.append(b)
+    # panels as wide as their views at one common height (no panel squeezed into a tall, empty column)
+    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.5, 2.2)) for x0, x1, y0, y1 in boxes]
+    height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
+    fig = Figure(figsize=(width_in, height + 1.2), layout="constrained")
+    axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
+    for ax, view, b, box in zip(axes, views, bases, boxes):
+        ratio = (box[3] - box[2]) / (box[1] - box[0])
+        panel_px = int(1.5 * dpi * max(height, height / ratio))
+        size = (panel_px, max(8, int(round(panel_px * ratio)))) if ratio <= 1 else \
+            (max(8, int(round(panel_px / ratio))), panel_px)
+        layers = [_shaded_layer(pts, mesh.triangles, b, colour, box, size)
+                  for pts, colour in ((hot, HOT_COLOUR), (cold, COLD_COLOUR))]
+        ax.imshow(_composite(layers, opacity), extent=box, origin="upper", interpolation="antialiased")
+        for lines, colour in ((hot_edges, HOT_COLOUR), (cold_edges, COLD_COLOUR)):
+            ax.add_collection(LineCollection([(ln @ b.T)[:, :2] for ln in lines], colors=[colour],
+                                             linewidths=0.9))
+        ax.set_xlim(box[0], box[1])
+        ax.set_ylim(box[2], box[3])
+        ax.set_aspect("equal")
+        ax.set_title(f"looking along the {view.name}\n{_direction_text(view.direction)}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel("mm", fontsize=7)
+    def look(colour):                       # a face's colour as the composite shows it (lit, translucent)
+        return tuple(1.0 - opacity + opacity * 0.9 * np.asarray(colour))
+
+    both = 0.5 * (np.asarray(HOT_COLOUR) + COLD_COLOUR)
+    fig.legend(handles=[Patch(facecolor=look(HOT_COLOUR), edgecolor=HOT_COLOUR, label="hot"),
+                        Patch(facecolor=look(COLD_COLOUR), edgecolor=COLD_COLOUR,
+                              label=f"cold, displacement × {scale:.3g}"),
+                        Patch(facecolor=look(both), edgecolor="none", label="both")],
+               loc="outside lower center", ncols=3, fontsize=9, frameon=False)
+    return _png(fig, dpi)
+
+
+# --------------------------------------------------------------------------------------------- error maps
+def _edge_node_uv(result, face: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes of the face's edges (role EDGE) placed on the face through its pcurves: indices and ``(u, v)``."""
+    cls = result.classification
+    idx, uvs = [], []
+    for use in result.part.faces[face].uses:
+        nodes = cls.nodes_of(EDGE, use.edge)
+        if not len(nodes) or len(use.t) < 2:
+            continue
+        t = cls.t[nodes]
+        order = np.argsort(use.t)
+        ts = use.t[order]
+        uv = np.column_stack([np.interp(t, ts, use.uv[order, 0]), np.interp(t, ts, use.uv[order, 1])])
+        idx.append(nodes)
+        uvs.append(uv)
+    if not idx:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    return np.concatenate(idx), np.concatenate(uvs)
+
+
+def error_faces(result, max_faces: int = 12) -> list[int]:
+    """The faces :func:`error_maps_png` draws by default: those with FE nodes, most nodes first."""
+    counts = [(f.nodes, f.index) for f in result.report.faces if f.nodes > 0]
+    return sorted(k for _, k in sorted(counts, reverse=True)[:max_faces])
+
+
+def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
+                   columns: int = 3, panel_in: float = 4.2, dpi: int = 100) -> bytes:
+    """Per face, its FE nodes coloured by their distance to the cold part (mm, eq. 21), over the face in
+    developed parameters; nodes of its edges as diamonds.  Returns PNG bytes."""
+    faces = error_faces(result) if faces is None else list(faces)
+    if not faces:
+        raise ValueError("no face to draw")
+    mesh = mesh if mesh is not None else mesh_of(result)
+    cls = result.classification
+    err = np.asarray(result.node_errors, float)
+    rows, cols = _grid(len(faces), columns)
+    fig = Figure(figsize=(panel_in * cols, panel_in * 0.95 * rows), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax in axes[len(faces):]:
+        ax.set_axis_off()
+    for ax, k in zip(axes, faces):
+        surface = result.part.faces[k].surface
+        verts, tris = _face_vertices(mesh, k)
+        dev = _Developed.of(surface, _clip_uv(surface, mesh.uv[verts]))
+        xy = dev.xy(mesh.uv[verts])
+        ax.add_collection(PolyCollection(xy[tris], facecolors="0.9", edgecolors="0.9", linewidths=0.3))
+        face_nodes = cls.nodes_of(FACE, k)
+        edge_nodes, edge_uv = _edge_node_uv(result, k)
+        pts = np.concatenate([dev.xy(cls.uv[face_nodes]), dev.xy(edge_uv)])
+        vals = np.concatenate([err[face_nodes], err[edge_nodes]])
+        marker = np.r_[np.zeros(len(face_nodes), bool), np.ones(len(edge_nodes), bool)]
+        ok = np.isfinite(vals)
+        pts, vals, marker = pts[ok], vals[ok], marker[ok]
+        vmax = float(vals.max()) if len(vals) and vals.max() > 0 else 1.0
+        norm = Normalize(0.0, vmax)
+        size = float(np.clip(3000.0 / max(len(vals), 1), 1.5, 25.0))
+        sc = None
+        for m, sym, s in ((False, "o", size), (True, "D", 1.6 * size)):
+            sel = marker == m
+            order = np.argsort(vals[sel])                              # largest errors on top
+            if sel.any():
+                sc = ax.scatter(pts[sel][order, 0], pts[sel][order, 1], c=vals[sel][order], cmap="viridis",
+                                norm=norm, s=s, marker=sym, linewidths=0)
+        if sc is not None:
+            cb = fig.colorbar(sc, ax=ax, shrink=0.9, format=_SMALL)
+            cb.set_label("distance to cold part [mm]", fontsize=8)
+            cb.ax.tick_params(labelsize=7)
+        rep = result.report.faces[k]
+        ax.set_title(f"face {k}: {rep.nodes} nodes, {len(edge_nodes)} on edges\n"
+                     f"Δmax {rep.delta_max:.2e} mm, Δmean {rep.delta_mean:.2e} mm", fontsize=9)
+        allxy = np.concatenate([xy, pts]) if len(pts) else xy
+        lo, hi = allxy.min(axis=0), allxy.max(axis=0)
+        pad = 0.03 * (hi - lo) + 1e-9
+        ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+        ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+        _set_aspect(ax, allxy)
+        ax.set_xlabel("along u [mm]", fontsize=8)
+        ax.set_ylabel("along v [mm]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    return _png(fig, dpi)
+
+
+# -------------------------------------------------------------------------------------------- curvature
+def curvature_faces(result, n_faces: int = 4, mesh: TriangleMesh | None = None) -> list[int]:
+    """The largest faces by area (most first), for :func:`curvature_png`."""
+    mesh = mesh if mesh is not None else mesh_of(result)
+    area = _face_areas(mesh, len(result.part.faces))
+    return [int(k) for k in np.argsort(-area, kind="stable")[:n_faces] if area[k] > 0]
+
+
+def _inside_mask(xy: np.ndarray, triangles: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """Which nodes of the regular grid ``gx`` (nx,) x ``gy`` (ny,) lie in one of the triangles (a face's
+    trimmed domain from its mesh): a mask ``(ny, nx)``, rasterised triangle by triangle on its bounding box."""
+    inside = np.zeros((len(gy), len(gx)), bool)
+    dx, dy = gx[1] - gx[0], gy[1] - gy[0]
+    tol = 1e-9
+    for a, b, c in xy[triangles]:
+        lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+        i0, i1 = int(np.ceil((lo[0] - gx[0]) / dx - tol)), int(np.floor((hi[0] - gx[0]) / dx + tol))
+        j0, j1 = int(np.ceil((lo[1] - gy[0]) / dy - tol)), int(np.floor((hi[1] - gy[0]) / dy + tol))
+        i0, j0, i1, j1 = max(i0, 0), max(j0, 0), min(i1, len(gx) - 1), min(j1, len(gy) - 1)
+        if i1 < i0 or j1 < j0:
+            continue
+        px, py = np.meshgrid(gx[i0:i1 + 1], gy[j0:j1 + 1])
+        det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if det == 0:
+            continue
+        l1 = ((px - a[0]) * (c[1] - a[1]) - (py - a[1]) * (c[0] - a[0])) / det
+        l2 = ((b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0])) / det
+        inside[j0:j1 + 1, i0:i1 + 1] |= (l1 >= -tol) & (l2 >= -tol) & (l1 + l2 <= 1 + tol)
+    return inside
+
+
+def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray, tris: np.ndarray) -> float:
+    """+1 when the surface normal ``S_u x S_v`` points out of the solid on this face, -1 when inward (the
+    mesh's triangles face outward)."""
+    p = mesh.vertices[verts][tris]
+    outward = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    uv = _clip_uv(surface, mesh.uv[verts][tris].mean(axis=1))
+    su, sv = surface_derivatives(surface, uv[:, 0], uv[:, 1])
+    return 1.0 if np.nansum(np.einsum("ij,ij->i", np.cross(su, sv), outward)) >= 0 else -1.0
+
+
+def _curvature_norm(values: np.ndarray):
+    """Colour scale of a curvature map: 1-99 % of the values (a sharp leading edge does not wash out the
+    rest), centred on zero when they change sign."""
+    finite = values[np.isfinite(values)]
+    if not len(finite):
+        return Normalize(-1.0, 1.0)
+    lo, hi = np.percentile(finite, [1, 99])
+    if lo == hi:
+        lo, hi = lo - max(abs(lo), 1e-9), hi + max(abs(hi), 1e-9)
+    if lo < 0 < hi:
+        return TwoSlopeNorm(0.0, lo, hi)
+    return Normalize(lo, hi)
+
+
+def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
+                  panel_in: float = 4.0, dpi: int = 100, grid_points: int = 60000) -> bytes:
+    """Mean curvature of the hot and the morphed surface of each face (a row per face: hot, cold, cold
+    minus hot), on a regular grid over the face's trimmed domain in developed parameters.  The sign is
+    taken with the outward normal of the solid and flipped so that H > 0 where the face is convex.  Hot
+    and cold share one colour scale.  Default faces: the four largest.  Returns PNG bytes."""
+    mesh = mesh if mesh is not None else mesh_of(result)
+    faces = curvature_faces(result, mesh=mesh) if faces is None else list(faces)
+    if not faces:
+        raise ValueError("no face to draw")
+    fig = Figure(figsize=(panel_in * 3, panel_in * 0.95 * len(faces)), layout="constrained")
+    axes = fig.subplots(len(faces), 3, squeeze=False)
+    for row, k in zip(axes, faces):
+        hot_s, cold_s = result.part.faces[k].surface, result.faces[k].surface
+        verts, tris = _face_vertices(mesh, k)
+        uv0 = _clip_uv(hot_s, mesh.uv[verts])
+        dev = _Developed.of(hot_s, uv0)
+        xy = dev.xy(uv0)
+        ext = np.maximum(np.ptp(xy, axis=0), 1e-12)
+        ratio = ext[0] / ext[1]
+        if 1 / 3 <= ratio <= 3:                     # drawn to scale: square grid cells
+            nx = int(np.clip(np.sqrt(grid_points * ratio), 16, 1000))
+            ny = int(np.clip(grid_points / nx, 16, 1000))
+        else:                                       # a strip, drawn stretched
+            nx = ny = int(np.sqrt(grid_points))
+        gx = np.linspace(xy[:, 0].min(), xy[:, 0].max(), nx)
+        gy = np.linspace(xy[:, 1].min(), xy[:, 1].max(), ny)
+        inside = _inside_mask(xy, tris, gx, gy)
+        px, py = np.meshgrid(gx, gy)
+        uv = _clip_uv(hot_s, dev.uv(np.column_stack([px[inside], py[inside]])))
+        sign = -_outward_sign(hot_s, mesh, verts, tris)            # convex positive
+        values = []
+        for surf in (hot_s, cold_s):
+            grid = np.full(inside.shape, np.nan)
+            grid[inside] = sign * mean_curvature(surf, uv[:, 0], uv[:, 1])
+            values.append(grid)
+        h_hot, h_cold = values
+        diff = h_cold - h_hot
+        norm = _curvature_norm(np.concatenate([h_hot[inside], h_cold[inside]]))
+        dmax = float(np.nanpercentile(np.abs(diff[inside]), 99)) if inside.any() else 0.0
+        dnorm = TwoSlopeNorm(0.0, -max(dmax, 1e-12), max(dmax, 1e-12))
+        panels = ((h_hot, norm, "hot", "H"), (h_cold, norm, "cold (morphed)", "H"),
+                  (diff, dnorm, "cold − hot", "ΔH"))
+        extent = (gx[0], gx[-1], gy[0], gy[-1])
+        for ax, (vals, nrm, label, sym) in zip(row, panels):
+            cmap = "RdBu_r" if sym == "H" else "PuOr_r"
+            im = ax.imshow(vals, origin="lower", extent=extent, cmap=cmap, norm=nrm, interpolation="nearest")
+            cb = fig.colorbar(im, ax=ax, shrink=0.9, format=_SMALL, extend="both")
+            cb.set_label(f"mean curvature {sym} [1/mm]", fontsize=8)
+            cb.ax.tick_params(labelsize=7)
+            shown = vals[inside]
+            rng = (f"{np.nanmin(shown):.3g} … {np.nanmax(shown):.3g} 1/mm" if np.isfinite(shown).any()
+                   else "undefined")
+            ax.set_title(f"face {k}, {label}\n{sym} {rng}", fontsize=9)
+            ax.set_aspect("equal" if 1 / 3 <= ratio <= 3 else "auto")
+            ax.set_xlabel("along u [mm]", fontsize=8)
+            ax.set_ylabel("along v [mm]", fontsize=8)
+            ax.tick_params(labelsize=7)
+    return _png(fig, dpi)
