@@ -200,26 +200,25 @@ def _morph(args) -> int:
                    invert=args.invert, progress=progress)
     if not args.quiet:
         print(result.report.table())
-    if args.report:
-        try:
+    written = args.written = []         # for the messages of a failure or an interruption from here on
+    try:
+        if args.report:
             _write_json_atomically(result.report.to_dict(), args.report)
-        except OutputError as exc:
-            raise OutputError(f"{exc} (nothing written)") from exc
-    check_result(result)
-    try:
-        result.write_step(args.output)
-    except OSError as exc:
-        raise OutputError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
-    written = [args.output]
-    if not args.quiet:
-        print(f"wrote {args.output}")
-    try:
+            written.append(args.report)
+        check_result(result)
+        try:
+            result.write_step(args.output)
+        except OSError as exc:
+            raise OutputError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+        written.append(args.output)
+        if not args.quiet:
+            print(f"wrote {args.output}")
         for path in _write_exports(args, result):
             written.append(path)
             if not args.quiet:
                 print(f"wrote {path}")
     except OutputError as exc:
-        raise OutputError(f"{exc} ({', '.join(map(str, written))} written)") from exc
+        raise OutputError(f"{exc} ({', '.join(map(str, written)) or 'nothing'} written)") from exc
     if result.report.tolerance_met is False:
         print(f"hot2cold: tolerance {args.tolerance} mm not met (Δmax {result.report.delta_max:.3g} mm); "
               f"the cold part is written", file=sys.stderr)
@@ -230,20 +229,20 @@ def _morph(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``hot2cold`` console script; returns the exit code."""
     args = _parser().parse_args(argv)
-    # The package's loggers go to this run's stderr: -q errors only, -v every step.
+    # Log records go to this run's stderr: -q errors only, default warnings too, -v every step of hot2cold.
     level = logging.ERROR if args.quiet else logging.INFO if args.verbose else logging.WARNING
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    saved = log.level, log.propagate
-    log.addHandler(handler)
+    handler.setLevel(level)
+    root = logging.getLogger()
+    saved = log.level
+    root.addHandler(handler)
     log.setLevel(level)
-    log.propagate = False
     try:
         return _run(args)
     finally:
-        log.removeHandler(handler)
-        log.setLevel(saved[0])
-        log.propagate = saved[1]
+        root.removeHandler(handler)
+        log.setLevel(saved)
 
 
 def _run(args) -> int:
@@ -253,7 +252,8 @@ def _run(args) -> int:
         print(f"hot2cold: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("hot2cold: interrupted; nothing written", file=sys.stderr)
+        written = getattr(args, "written", [])
+        print(f"hot2cold: interrupted; {', '.join(map(str, written)) or 'nothing'} written", file=sys.stderr)
         return 130
     except Exception as exc:  # a bug: one line, the traceback only with -v
         if args.verbose:

@@ -205,12 +205,29 @@ def test_cli_write_failure_is_one_line_with_exit_code_6(tmp_path, block_step, bl
 
     monkeypatch.setattr(trimesh.Trimesh, "export", full_disk)
     code = main(_args(block_step, block_field, tmp_path, "--stl", tmp_path / "c.stl", "--vtu", tmp_path / "n.vtu",
-                      "-q"))
+                      "--report", tmp_path / "r.json", "-q"))
     assert code == 6
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith("hot2cold: error: cannot write ")
-    assert "c.stl: No space left on device" in err[0] and "cold.step" in err[0] and "n.vtu" in err[0]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["cold.step", "n.vtu", "n_surface.vtu"]
+    written = ", ".join(str(tmp_path / name) for name in ("r.json", "cold.step", "n.vtu", "n_surface.vtu"))
+    assert err[0].endswith(f"c.stl: No space left on device ({written} written)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cold.step", "n.vtu", "n_surface.vtu", "r.json"]
+
+
+def test_cli_report_failure_writes_nothing(tmp_path, block_step, block_field, capsys, monkeypatch):
+    import json
+
+    def full_disk(data, fh, **kwargs):
+        fh.write("{")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(json, "dump", full_disk)
+    code = main(_args(block_step, block_field, tmp_path, "--report", tmp_path / "r.json", "--stl", tmp_path / "c.stl",
+                      "-q"))
+    assert code == 6
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"hot2cold: error: cannot write {tmp_path / 'r.json'}: No space left on device (nothing written)"]
+    assert list(tmp_path.iterdir()) == []
 
 
 def _refused_before_the_run(capsys, monkeypatch, argv, *words):
