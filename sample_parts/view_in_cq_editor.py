@@ -36,7 +36,7 @@ from hot2cold.morph import morph
 exaggerate = 1.0
 show_nodes = True
 nodes_on = "cold"
-max_nodes = 3000
+max_nodes = 1500
 sample_dir = ""
 
 # (a dict, so that CQGI does not take the file names for parameters)
@@ -79,13 +79,14 @@ scale = float(exaggerate)
 result = morph(folder / FILES["step"], (field.points, scale * field.displacements))
 
 # show_object's options are passed as a fresh dict each time (CQGI's default dict is shared between calls).
+# In CQ-editor 0.7 "alpha" is the opacity: 1 opaque, 0 invisible.
 if "show_object" not in globals():  # plain python: list what would be shown
     def show_object(obj, name=None, options=None):
         print(f"{name}: {type(obj).__name__}, valid={obj.isValid()}, options={options}")
 
-show_object(result.hot, name="hot", options={"color": "red", "alpha": 0.6})
-show_object(result.cold, name="cold", options={"color": "blue", "alpha": 0.0})
+show_object(result.hot, name="hot", options={"color": "red", "alpha": 0.35})
+show_object(result.cold, name="cold", options={"color": "blue", "alpha": 1.0})
 if show_nodes:
     at = scale if str(nodes_on).lower() == "cold" else 0.0
     show_object(node_points(field.points, field.displacements, at, max_nodes), name="nodes",
-                options={"color": "black", "alpha": 0.0})
+                options={"color": "black", "alpha": 1.0})
