@@ -82,12 +82,13 @@ def test_cold_is_the_hot_moved_by_the_field(true_scale, field):
     hot, cold = true_scale["hot"].shape, true_scale["cold"].shape
     h, c = corners(hot), corners(cold)
     assert h.shape == c.shape  # same topology, corners in the same order
-    moved, expected = c - h, field_at(field, h)
-    assert np.abs(moved - expected).max() < 0.1 * np.abs(expected).max()
+    moved, expected = c - h, field_at(field, h)   # the field has a node on every corner
+    assert np.abs(expected).max() > 0.5
+    assert np.abs(moved - expected).max() < 0.01
     assert abs(cold.Volume() - hot.Volume()) < 0.05 * hot.Volume()
     # the nodes are shown where the field takes them: on the cold part
     nodes = true_scale["nodes"].shape.Vertices()[::50]
-    assert max(cold.distance(v) for v in nodes) < 0.05
+    assert max(cold.distance(v) for v in nodes) < 0.01
 
 
 def test_exaggerate_scales_the_shown_displacement(true_scale, exaggerated):
@@ -98,7 +99,7 @@ def test_exaggerate_scales_the_shown_displacement(true_scale, exaggerated):
     moved10 = corners(exaggerated["cold"].shape) - h
     assert exaggerated["cold"].shape.isValid()
     assert np.linalg.norm(moved10, axis=1).max() > 5.0         # the blade moves 1.55 mm at the most
-    assert np.abs(moved10 - 10 * moved1).max() < 0.05 * np.abs(10 * moved1).max()
+    assert np.abs(moved10 - 10 * moved1).max() < 0.01                # 10 x further, to 0.01 mm
 
 
 def test_a_wrong_sample_dir_fails_with_a_message(tmp_path):
