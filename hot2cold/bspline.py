@@ -486,10 +486,12 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     # The (p+1) x (q+1) block of homogeneous poles of each row: (m, p+1, q+1, 4).
     iu = su[:, None] + np.arange(p + 1)
     iv = sv[:, None] + np.arange(q + 1)
-    block = homo[iu[:, :, None], iv[:, None, :]]
+    m = len(su)
+    block = homo[iu[:, :, None], iv[:, None, :]].reshape(m, (p + 1) * (q + 1), 4)
     out = []
     for a, b in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)):
-        out.append(np.einsum("mi,mj,mijk->mk", bu[a], bv[b], block))
+        w = (bu[a][:, :, None] * bv[b][:, None, :]).reshape(m, 1, (p + 1) * (q + 1))
+        out.append(np.matmul(w, block)[:, 0, :])
     return out
 
 

@@ -379,25 +379,24 @@ def curvature_faces(result, n_faces: int = 4, mesh: TriangleMesh | None = None) 
 
 def _inside_mask(xy: np.ndarray, triangles: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """Which nodes of the regular grid ``gx`` (nx,) x ``gy`` (ny,) lie in one of the triangles (a face's
-    trimmed domain from its mesh): a mask ``(ny, nx)``, rasterised triangle by triangle on its bounding box."""
-    inside = np.zeros((len(gy), len(gx)), bool)
-    dx, dy = gx[1] - gx[0], gy[1] - gy[0]
-    tol = 1e-9
-    for a, b, c in xy[triangles]:
-        lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-        i0, i1 = int(np.ceil((lo[0] - gx[0]) / dx - tol)), int(np.floor((hi[0] - gx[0]) / dx + tol))
-        j0, j1 = int(np.ceil((lo[1] - gy[0]) / dy - tol)), int(np.floor((hi[1] - gy[0]) / dy + tol))
-        i0, j0, i1, j1 = max(i0, 0), max(j0, 0), min(i1, len(gx) - 1), min(j1, len(gy) - 1)
-        if i1 < i0 or j1 < j0:
-            continue
-        px, py = np.meshgrid(gx[i0:i1 + 1], gy[j0:j1 + 1])
-        det = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-        if det == 0:
-            continue
-        l1 = ((px - a[0]) * (c[1] - a[1]) - (py - a[1]) * (c[0] - a[0])) / det
-        l2 = ((b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0])) / det
-        inside[j0:j1 + 1, i0:i1 + 1] |= (l1 >= -tol) & (l2 >= -tol) & (l1 + l2 <= 1 + tol)
-    return inside
+    trimmed domain from its mesh): a mask ``(ny, nx)``.  The triangles are rasterised by Agg onto an image
+    whose pixel centres are the grid nodes (boundary pixels included)."""
+    nx, ny = len(gx), len(gy)
+    dx = (gx[-1] - gx[0]) / max(nx - 1, 1) or 1.0
+    dy = (gy[-1] - gy[0]) / max(ny - 1, 1) or 1.0
+    fig = Figure(figsize=(nx, ny), dpi=1)                         # one pixel per grid node, exactly
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_axis_off()
+    ax.set_xlim(gx[0] - dx / 2, gx[-1] + dx / 2)
+    ax.set_ylim(gy[0] - dy / 2, gy[-1] + dy / 2)
+    ax.add_collection(PolyCollection(xy[triangles], facecolors="k", edgecolors="k", linewidths=72.0,
+                                     antialiaseds=False))         # 1 px wide edges: boundary nodes count
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    alpha = np.asarray(canvas.buffer_rgba())[..., 3]
+    if alpha.shape != (ny, nx):
+        raise RuntimeError(f"rasterised mask is {alpha.shape}, expected {(ny, nx)}")
+    return alpha[::-1] > 127
 
 
 def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray, tris: np.ndarray) -> float:
@@ -425,7 +424,7 @@ def _curvature_norm(values: np.ndarray):
 
 
 def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
-                  panel_in: float = 4.0, dpi: int = 100, grid_points: int = 60000) -> bytes:
+                  panel_in: float = 4.0, dpi: int = 100, grid_points: int = 40000) -> bytes:
     """Mean curvature of the hot and the morphed surface of each face (a row per face: hot, cold, cold
     minus hot), on a regular grid over the face's trimmed domain in developed parameters.  The sign is
     taken with the outward normal of the solid and flipped so that H > 0 where the face is convex.  Hot
