@@ -40,7 +40,7 @@ from .model import EdgeUse, Face, Part
 log = logging.getLogger(__name__)
 
 #: Reason given for an edge that is not a whole side of both faces' surfaces (trimmed faces, split sides).
-NOT_ISO_SIDE = "not an iso-side of both faces"
+NOT_ISO_SIDE = "the edge is not on a side of the surface"
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,9 +177,77 @@ def _row_mask(shape: tuple[int, int], side: str, second: bool = False) -> np.nda
     return mask
 
 
+def _on_side(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tuple[str, bool] | None:
+    """The side of the surface's domain an edge use lies on, whole or in part (a trimmed face's edge on
+    the boundary of its untrimmed surface), and whether it runs against the side's direction; else None.
+    The cross derivative along a side depends on the side row and the second row only, whatever part of
+    the side the edge covers."""
+    found = _side_of(surface, use, rel_tol)
+    if found is not None:
+        return found
+    u0, u1, v0, v1 = surface.domain
+    span = np.array([u1 - u0, v1 - v0])
+    for side, (axis, end) in SIDES.items():
+        if np.all(np.abs(use.uv[:, axis] - (u0, u1, v0, v1)[2 * axis + end]) <= rel_tol * span[axis]):
+            return side, bool(use.uv[0, 1 - axis] > use.uv[-1, 1 - axis])
+    return None
+
+
+def _side_row(poles: np.ndarray, side: str, backwards: bool) -> tuple:
+    """Index expression of a side's row in a ``(nu, nv, ...)`` array, ordered along the edge."""
+    axis, end = SIDES[side]
+    i = 0 if end == 0 else -1
+    along = slice(None, None, -1) if backwards else slice(None)
+    return (i, along) if axis == 0 else (along, i)
+
+
+def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Face, Face],
+                    sides: tuple[tuple[str, bool], tuple[str, bool]], tied_sides: list[tuple[str, ...]]) -> None:
+    """Make the two faces' side rows along an edge one row again (the paper's common row, eq. 74).
+
+    Faces that are trimmed are fitted each on its own, so their side rows, equal when hot, drift apart by
+    the fit's error; then the tangents along the edge differ and no second row can close the kink.  When
+    the two hot rows are the same row (same length, degree, knots and weights along the edge, same poles),
+    both take the mean of their displacements, or a row tied to the edge is kept and the other takes it.
+    """
+    rows, hot_rows, knots, weights = [], [], [], []
+    for face, (side, backwards) in zip(faces, sides):
+        axis = SIDES[side][0]
+        index = _side_row(face.surface.poles, side, backwards)
+        rows.append(surfaces[face.index].poles[index])
+        hot_rows.append(face.surface.poles[index])
+        k = face.surface.v_knots if axis == 0 else face.surface.u_knots
+        k = (k - k[0]) / (k[-1] - k[0])
+        knots.append(1.0 - k[::-1] if backwards else k)
+        w = face.surface.weights
+        weights.append(None if w is None else w[index])
+        if (face.surface.v_degree if axis == 0 else face.surface.u_degree) != \
+                (faces[0].surface.v_degree if SIDES[sides[0][0]][0] == 0 else faces[0].surface.u_degree):
+            return
+    if (rows[0].shape != rows[1].shape or knots[0].shape != knots[1].shape
+            or not np.allclose(knots[0], knots[1], rtol=0, atol=1e-9)
+            or np.abs(hot_rows[0] - hot_rows[1]).max() > 1e-9 * part.diagonal):
+        return
+    if weights[0] is not None or weights[1] is not None:
+        wa = np.ones(len(rows[0])) if weights[0] is None else weights[0]
+        wb = np.ones(len(rows[1])) if weights[1] is None else weights[1]
+        if not np.allclose(wa / wb, (wa / wb)[0], rtol=1e-9, atol=0):
+            return
+    tied = [side in tied_sides[face.index] for face, (side, _) in zip(faces, sides)]
+    if all(tied):
+        return
+    shared = rows[0] if tied[0] else rows[1] if tied[1] else 0.5 * (rows[0] + rows[1])
+    for face, (side, backwards), is_tied in zip(faces, sides, tied):
+        if is_tied:
+            continue
+        poles = surfaces[face.index].poles.copy()
+        poles[_side_row(poles, side, backwards)] = shared
+        surfaces[face.index] = surfaces[face.index].with_poles(poles)
+
+
 def _fixed_reason(face: Face, found: tuple[str, bool] | None, tied: tuple[str, ...]) -> str:
-    """Why ``face`` cannot turn about an edge that runs along its side ``found`` (``_side_of``; None when the
-    edge is not a whole side), or "" when its second row there has poles free to move."""
+    """Why ``face`` cannot turn about an edge that runs along its side ``found`` (``_on_side``; None when the
+    edge is not on a side), or "" when its second row there has poles free to move."""
     if found is None:
         return NOT_ISO_SIDE
     side = found[0]
@@ -254,7 +322,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         uv_a, uv_b = _matched_uv(use_a, use_b)
         matched.append((uv_a, uv_b))
         before.append(_max(kink_angles(surfaces[fa.index], uv_a, surfaces[fb.index], uv_b)))
-        sides = (_side_of(fa.surface, use_a), _side_of(fb.surface, use_b))
+        sides = (_on_side(fa.surface, use_a), _on_side(fb.surface, use_b))
         why = [_fixed_reason(face, found, tied_sides[face.index]) for face, found in zip((fa, fb), sides)]
         if all(why):
             reason = why[0] if why[0] == why[1] else "; ".join(why)
@@ -264,6 +332,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         reasons.append("")
         if any(why):
             log.info("G1: edge %d (faces %d, %d): one face moves (%s)", te.edge, *te.faces, why[0] or why[1])
+        if None not in sides:
+            _share_side_row(part, surfaces, (fa, fb), sides, tied_sides)
         # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
         n_row = max(face.surface.shape[1 - SIDES[found[0]][0]] for face, found in zip((fa, fb), sides) if found)
         m = max(n_points_factor * n_row, 2)

@@ -348,3 +348,25 @@ def test_filleted_block_every_tangent_edge_within_0_01_deg(block_shape, block_no
         assert b.delta_max <= 1e-3
     assert result.report.delta_max <= 1.01 * plain.report.delta_max
     assert all(s.valid and s.closed for s in result.report.solids)
+
+
+def test_trimmed_faces_on_a_side_share_their_row_and_close_the_kink():
+    """Trimmed faces whose common edge covers part of a side of both surfaces (Rotor 37's leading and
+    trailing edges): each was fitted on its own, so their side rows drifted apart; the rows are made one
+    again and the second rows turn, closing the kink along the edge."""
+    sa, sb = _patches()
+    t = np.linspace(0.1, 0.9, 25)
+    edge = Edge(0, BSplineCurve(sa.poles[-1], CUBIC6, 3), (0, 1), (0, 1))
+    faces = [Face(0, sa, np.array([0, 1, 0.1, 0.9]), (EdgeUse(0, t, np.column_stack([np.ones_like(t), t])),), 0),
+             Face(1, sb, np.array([0, 1, 0.1, 0.9]), (EdgeUse(0, t, np.column_stack([np.zeros_like(t), t])),), 0)]
+    part = Part(faces, [edge], np.array([sa.poles[-1, 0], sa.poles[-1, -1]]), [(0, 1)], 6.0, None)
+    drift = sb.poles.copy()
+    drift[0, :, 2] += 2e-3 * np.sin(np.linspace(0, 3, 6))      # b's side row off a's, as two fits leave it
+    kinked = _kinked(sb.with_poles(drift), 0.3)
+    edges = tangent_edges(part)
+    assert [e.edge for e in edges] == [0] and edges[0].sides == (None, None)    # not whole sides
+    surfaces, (rep,) = correct_g1(part, [sa, kinked], [(), ()], edges)
+    assert rep.corrected and rep.kink_before_max > 0.1
+    assert rep.kink_after_max <= 0.01
+    assert np.array_equal(surfaces[0].poles[-1], surfaces[1].poles[0])             # one row again
+    assert np.allclose(surfaces[0].poles[-1], 0.5 * (sa.poles[-1] + drift[0]), rtol=0, atol=1e-15)
