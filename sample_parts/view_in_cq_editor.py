@@ -5,8 +5,11 @@ Open this file in CQ-editor and press F5 (Render).  It morphs ``twisted_blade.st
 
 * ``hot``: the hot part, red and see-through;
 * ``cold``: the cold part, blue;
-* ``nodes``: a subsample of the FE nodes (``max_nodes`` of them) as points, at their cold positions
+* ``nodes``: an even subsample of the FE nodes (at most ``max_nodes``) as points, at their cold positions
   (hot position + ``exaggerate`` x displacement) or, with ``nodes_on = "hot"``, at their hot positions.
+  CQ-editor draws points as its default yellow "+" markers (its ``color`` option colours faces only).
+
+Each can be hidden with its check box in CQ-editor's Objects panel.
 
 Parameters (top-level assignments, which CQGI, the script runner CQ-editor uses, picks up; edit them here, or
 pass them as ``build_parameters``):
@@ -14,12 +17,15 @@ pass them as ``build_parameters``):
 * ``exaggerate``: scales the displacement for display: the part shown as cold is the morph with the field
   times ``exaggerate`` (cold_shown = hot + exaggerate x (cold - hot)).  The bundled field moves the blade by
   1.55 mm at the most, so 1.0 (true scale) looks like a slight offset; try 10.
-* ``show_nodes``: show the FE nodes or not.
+* ``show_nodes``, ``nodes_on``, ``max_nodes``: the FE nodes (see above).
 * ``sample_dir``: the folder with the STEP and the field.  Empty: CQGI runs a script with ``exec`` and
   does not set ``__file__``, so the folder is looked for, in this order, in the environment variable
   ``HOT2COLD_SAMPLES``, next to this file (when ``__file__`` is set), in the current directory and its
   ``sample_parts`` folder, and in the ``sample_parts`` folder of the checkout hot2cold is installed from
-  (``pip install -e``).  Nothing is cached on disk; each run morphs again (about 10 s).
+  (``pip install -e``).  CQ-editor itself sets ``__file__`` (and by default changes to the script's
+  folder), so there the files next to this script are found.
+
+Nothing is cached on disk: each run morphs again (10-20 s).
 
 Runs outside CQ-editor too: ``python sample_parts/view_in_cq_editor.py`` prints what it would show.
 """
@@ -89,4 +95,4 @@ show_object(result.cold, name="cold", options={"color": "blue", "alpha": 1.0})
 if show_nodes:
     at = scale if str(nodes_on).lower() == "cold" else 0.0
     show_object(node_points(field.points, field.displacements, at, max_nodes), name="nodes",
-                options={"color": "black", "alpha": 1.0})
+                options={})
