@@ -253,7 +253,7 @@ def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None
         boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
         bases.append(b)
     # panels as wide as their views at one common height (no panel squeezed into a tall, empty column)
-    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.5, 2.2)) for x0, x1, y0, y1 in boxes]
+    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]
     height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
     fig = Figure(figsize=(width_in, height + 1.2), layout="constrained")
     axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
@@ -355,8 +355,15 @@ def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh
             cb.set_label("distance to cold part [mm]", fontsize=8)
             cb.ax.tick_params(labelsize=7)
         rep = result.report.faces[k]
-        ax.set_title(f"face {k}: {rep.nodes} nodes, {len(edge_nodes)} on edges\n"
-                     f"Δmax {rep.delta_max:.2e} mm, Δmean {rep.delta_mean:.2e} mm", fontsize=9)
+        on_edges = err[edge_nodes]
+        on_edges = on_edges[np.isfinite(on_edges)]
+        edge_text = (f"{len(on_edges)} nodes of its edges: Δmax {on_edges.max():.2e} mm" if len(on_edges)
+                     else "no nodes on its edges")
+        ax.set_title(f"face {k}: {rep.nodes} nodes, Δmax {rep.delta_max:.2e}, Δmean {rep.delta_mean:.2e} mm\n"
+                     f"{edge_text}", fontsize=8)
+        if len(vals):                                                  # ring the worst node
+            worst = int(np.argmax(vals))
+            ax.scatter(pts[worst, 0], pts[worst, 1], s=90, facecolors="none", edgecolors="red", linewidths=1.2)
         allxy = np.concatenate([xy, pts]) if len(pts) else xy
         lo, hi = allxy.min(axis=0), allxy.max(axis=0)
         pad = 0.03 * (hi - lo) + 1e-9
@@ -379,24 +386,25 @@ def curvature_faces(result, n_faces: int = 4, mesh: TriangleMesh | None = None) 
 
 def _inside_mask(xy: np.ndarray, triangles: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """Which nodes of the regular grid ``gx`` (nx,) x ``gy`` (ny,) lie in one of the triangles (a face's
-    trimmed domain from its mesh): a mask ``(ny, nx)``.  The triangles are rasterised by Agg onto an image
-    whose pixel centres are the grid nodes (boundary pixels included)."""
-    nx, ny = len(gx), len(gy)
+    trimmed domain from its mesh): a mask ``(ny, nx)``.  The triangles are rasterised by Agg (no
+    antialiasing) on three pixels per grid step, and a node is in when the pixel centred on it is: the
+    rasteriser's edge rounding then reaches a third of a grid step at most."""
+    nx, ny, sub = len(gx), len(gy), 3
     dx = (gx[-1] - gx[0]) / max(nx - 1, 1) or 1.0
     dy = (gy[-1] - gy[0]) / max(ny - 1, 1) or 1.0
-    fig = Figure(figsize=(nx, ny), dpi=1)                         # one pixel per grid node, exactly
+    fig = Figure(figsize=(sub * nx, sub * ny), dpi=1)             # whole pixels, exactly
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
     ax.set_axis_off()
     ax.set_xlim(gx[0] - dx / 2, gx[-1] + dx / 2)
     ax.set_ylim(gy[0] - dy / 2, gy[-1] + dy / 2)
-    ax.add_collection(PolyCollection(xy[triangles], facecolors="k", edgecolors="k", linewidths=72.0,
-                                     antialiaseds=False))         # 1 px wide edges: boundary nodes count
+    ax.add_collection(PolyCollection(xy[triangles], facecolors="k", edgecolors="none", linewidths=0.0,
+                                     antialiaseds=False))
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
-    alpha = np.asarray(canvas.buffer_rgba())[..., 3]
-    if alpha.shape != (ny, nx):
-        raise RuntimeError(f"rasterised mask is {alpha.shape}, expected {(ny, nx)}")
-    return alpha[::-1] > 127
+    red = np.asarray(canvas.buffer_rgba())[..., 0]                 # black triangles on the white figure
+    if red.shape != (sub * ny, sub * nx):
+        raise RuntimeError(f"rasterised mask is {red.shape}, expected {(sub * ny, sub * nx)}")
+    return red[::-1][sub // 2::sub, sub // 2::sub] < 128
 
 
 def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray, tris: np.ndarray) -> float:
@@ -411,24 +419,72 @@ def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray
 
 def _curvature_norm(values: np.ndarray):
     """Colour scale of a curvature map: 1-99 % of the values (a sharp leading edge does not wash out the
-    rest), centred on zero when they change sign."""
+    rest), zero always white, so on the diverging map red is convex and blue concave."""
     finite = values[np.isfinite(values)]
     if not len(finite):
         return Normalize(-1.0, 1.0)
-    lo, hi = np.percentile(finite, [1, 99])
-    if lo == hi:
-        lo, hi = lo - max(abs(lo), 1e-9), hi + max(abs(hi), 1e-9)
+    lo, hi = (float(x) for x in np.percentile(finite, [1, 99]))
     if lo < 0 < hi:
         return TwoSlopeNorm(0.0, lo, hi)
-    return Normalize(lo, hi)
+    top = max(abs(lo), abs(hi)) or 1e-9                # one sign: symmetric about zero
+    return Normalize(-top, top)
+
+
+@dataclass(frozen=True, eq=False)
+class FaceCurvature:
+    """Mean curvature of a face on a regular grid over its trimmed domain, in developed parameters.
+
+    ``extent = (x0, x1, y0, y1)`` in mm; ``hot`` and ``cold`` ``(ny, nx)`` in 1/mm, NaN outside the face
+    (``inside`` False).  The sign is taken with the outward normal of the solid and flipped, so H > 0
+    where the face is convex (bulges outward) and H < 0 where it is concave.
+    """
+
+    face: int
+    extent: tuple[float, float, float, float]
+    inside: np.ndarray
+    hot: np.ndarray
+    cold: np.ndarray
+    equal_aspect: bool
+
+
+def face_curvature(result, k: int, mesh: TriangleMesh | None = None, grid_points: int = 40000) -> FaceCurvature:
+    """Mean curvature of the hot and the morphed surface of face ``k`` at the same parameters."""
+    mesh = mesh if mesh is not None else mesh_of(result)
+    hot_s, cold_s = result.part.faces[k].surface, result.faces[k].surface
+    verts, tris = _face_vertices(mesh, k)
+    if not len(verts):
+        raise ValueError(f"face {k} has no triangles")
+    uv0 = _clip_uv(hot_s, mesh.uv[verts])
+    dev = _Developed.of(hot_s, uv0)
+    xy = dev.xy(uv0)
+    ext = np.maximum(np.ptp(xy, axis=0), 1e-12)
+    ratio = ext[0] / ext[1]
+    equal = bool(1 / 3 <= ratio <= 3)
+    if equal:                                   # drawn to scale: square grid cells
+        nx = int(np.clip(np.sqrt(grid_points * ratio), 16, 1000))
+        ny = int(np.clip(grid_points / nx, 16, 1000))
+    else:                                       # a strip, drawn stretched
+        nx = ny = int(np.clip(np.sqrt(grid_points), 16, 1000))
+    gx = np.linspace(xy[:, 0].min(), xy[:, 0].min() + ext[0], nx)
+    gy = np.linspace(xy[:, 1].min(), xy[:, 1].min() + ext[1], ny)
+    inside = _inside_mask(xy, tris, gx, gy)
+    px, py = np.meshgrid(gx, gy)
+    uv = _clip_uv(hot_s, dev.uv(np.column_stack([px[inside], py[inside]])))
+    sign = -_outward_sign(hot_s, mesh, verts, tris)                 # convex positive
+    values = []
+    for surf in (hot_s, cold_s):
+        grid = np.full(inside.shape, np.nan)
+        grid[inside] = sign * mean_curvature(surf, uv[:, 0], uv[:, 1])
+        values.append(grid)
+    return FaceCurvature(k, (float(gx[0]), float(gx[-1]), float(gy[0]), float(gy[-1])), inside, values[0],
+                         values[1], equal)
 
 
 def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
                   panel_in: float = 4.0, dpi: int = 100, grid_points: int = 40000) -> bytes:
     """Mean curvature of the hot and the morphed surface of each face (a row per face: hot, cold, cold
-    minus hot), on a regular grid over the face's trimmed domain in developed parameters.  The sign is
-    taken with the outward normal of the solid and flipped so that H > 0 where the face is convex.  Hot
-    and cold share one colour scale.  Default faces: the four largest.  Returns PNG bytes."""
+    minus hot), from :func:`face_curvature` (H > 0 where convex).  Hot and cold share one colour scale.
+    Default faces: the four largest.  Returns PNG bytes."""
     mesh = mesh if mesh is not None else mesh_of(result)
     faces = curvature_faces(result, mesh=mesh) if faces is None else list(faces)
     if not faces:
@@ -436,48 +492,25 @@ def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh 
     fig = Figure(figsize=(panel_in * 3, panel_in * 0.95 * len(faces)), layout="constrained")
     axes = fig.subplots(len(faces), 3, squeeze=False)
     for row, k in zip(axes, faces):
-        hot_s, cold_s = result.part.faces[k].surface, result.faces[k].surface
-        verts, tris = _face_vertices(mesh, k)
-        uv0 = _clip_uv(hot_s, mesh.uv[verts])
-        dev = _Developed.of(hot_s, uv0)
-        xy = dev.xy(uv0)
-        ext = np.maximum(np.ptp(xy, axis=0), 1e-12)
-        ratio = ext[0] / ext[1]
-        if 1 / 3 <= ratio <= 3:                     # drawn to scale: square grid cells
-            nx = int(np.clip(np.sqrt(grid_points * ratio), 16, 1000))
-            ny = int(np.clip(grid_points / nx, 16, 1000))
-        else:                                       # a strip, drawn stretched
-            nx = ny = int(np.sqrt(grid_points))
-        gx = np.linspace(xy[:, 0].min(), xy[:, 0].max(), nx)
-        gy = np.linspace(xy[:, 1].min(), xy[:, 1].max(), ny)
-        inside = _inside_mask(xy, tris, gx, gy)
-        px, py = np.meshgrid(gx, gy)
-        uv = _clip_uv(hot_s, dev.uv(np.column_stack([px[inside], py[inside]])))
-        sign = -_outward_sign(hot_s, mesh, verts, tris)            # convex positive
-        values = []
-        for surf in (hot_s, cold_s):
-            grid = np.full(inside.shape, np.nan)
-            grid[inside] = sign * mean_curvature(surf, uv[:, 0], uv[:, 1])
-            values.append(grid)
-        h_hot, h_cold = values
-        diff = h_cold - h_hot
-        norm = _curvature_norm(np.concatenate([h_hot[inside], h_cold[inside]]))
-        dmax = float(np.nanpercentile(np.abs(diff[inside]), 99)) if inside.any() else 0.0
+        fc = face_curvature(result, k, mesh, grid_points)
+        inside = fc.inside
+        diff = fc.cold - fc.hot
+        norm = _curvature_norm(np.concatenate([fc.hot[inside], fc.cold[inside]]))
+        dmax = float(np.nanpercentile(np.abs(diff[inside]), 99)) if np.isfinite(diff[inside]).any() else 0.0
         dnorm = TwoSlopeNorm(0.0, -max(dmax, 1e-12), max(dmax, 1e-12))
-        panels = ((h_hot, norm, "hot", "H"), (h_cold, norm, "cold (morphed)", "H"),
+        panels = ((fc.hot, norm, "hot", "H"), (fc.cold, norm, "cold (morphed)", "H"),
                   (diff, dnorm, "cold − hot", "ΔH"))
-        extent = (gx[0], gx[-1], gy[0], gy[-1])
         for ax, (vals, nrm, label, sym) in zip(row, panels):
             cmap = "RdBu_r" if sym == "H" else "PuOr_r"
-            im = ax.imshow(vals, origin="lower", extent=extent, cmap=cmap, norm=nrm, interpolation="nearest")
+            im = ax.imshow(vals, origin="lower", extent=fc.extent, cmap=cmap, norm=nrm, interpolation="nearest")
             cb = fig.colorbar(im, ax=ax, shrink=0.9, format=_SMALL, extend="both")
             cb.set_label(f"mean curvature {sym} [1/mm]", fontsize=8)
             cb.ax.tick_params(labelsize=7)
             shown = vals[inside]
-            rng = (f"{np.nanmin(shown):.3g} … {np.nanmax(shown):.3g} 1/mm" if np.isfinite(shown).any()
-                   else "undefined")
-            ax.set_title(f"face {k}, {label}\n{sym} {rng}", fontsize=9)
-            ax.set_aspect("equal" if 1 / 3 <= ratio <= 3 else "auto")
+            span = (f"{np.nanmin(shown):.3g} … {np.nanmax(shown):.3g} 1/mm" if np.isfinite(shown).any()
+                    else "undefined")
+            ax.set_title(f"face {k}, {label}\n{sym} {span}", fontsize=9)
+            ax.set_aspect("equal" if fc.equal_aspect else "auto")
             ax.set_xlabel("along u [mm]", fontsize=8)
             ax.set_ylabel("along v [mm]", fontsize=8)
             ax.tick_params(labelsize=7)

@@ -244,3 +244,34 @@ def test_default_faces_of_the_maps(blade, mesh):
     # the two end caps (planar, 2x2 nets) are the smallest faces and left out
     caps = {f.index for f in blade.part.faces if f.surface.shape == (2, 2)}
     assert len(caps) == 2 and not caps & set(largest)
+
+
+def test_inside_mask_is_the_triangles_up_to_a_third_of_a_grid_step():
+    # an L-shaped domain: the unit square without its upper-right quarter, in four triangles
+    xy = np.array([[0, 0], [1, 0], [1, 0.5], [0.5, 0.5], [0.5, 1], [0, 1]], float)
+    tris = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]])
+    gx, gy = np.linspace(0, 1, 61), np.linspace(0, 1, 41)
+    mask = visual._inside_mask(xy, tris, gx, gy)
+    assert mask.shape == (41, 61)
+    px, py = np.meshgrid(gx, gy)
+    exact = ~((px > 0.5) & (py > 0.5))
+    # distance to the L's boundary inside the square (the notch's two sides)
+    near = ((np.abs(px - 0.5) < (gx[1] - gx[0]) / 3) & (py >= 0.5)) | \
+           ((np.abs(py - 0.5) < (gy[1] - gy[0]) / 3) & (px >= 0.5))
+    assert np.array_equal(mask[~near], exact[~near])
+    assert mask[exact & ~near].all() and 0.70 < mask.mean() < 0.80
+
+
+def test_curvature_is_positive_on_the_round_leading_and_trailing_edges(blade, mesh):
+    """The blade's two edge strips (the faces with the largest curvature) are convex everywhere: H > 0
+    with the sign the pictures use; the morph changes H there by a few per cent at most."""
+    strips = [f.index for f in blade.part.faces if f.surface.shape != (2, 2)]
+    curv = {k: visual.face_curvature(blade, k, mesh, grid_points=5000) for k in strips}
+    peak = {k: np.nanmax(c.hot) for k, c in curv.items()}
+    rounds = sorted(peak, key=peak.get)[-2:]
+    for k in rounds:
+        c = curv[k]
+        h = c.hot[c.inside]
+        assert c.inside.mean() > 0.9 and np.isfinite(h).all()
+        assert (h > 0).all() and peak[k] > 1.0                   # radius below 0.5 mm
+        assert np.abs(c.cold - c.hot)[c.inside].max() < 0.05 * peak[k]
