@@ -357,9 +357,9 @@ def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh
         rep = result.report.faces[k]
         on_edges = err[edge_nodes]
         on_edges = on_edges[np.isfinite(on_edges)]
-        edge_text = (f"{len(on_edges)} nodes of its edges: Δmax {on_edges.max():.2e} mm" if len(on_edges)
+        edge_text = (f"{len(on_edges)} nodes of its edges: Δmax {on_edges.max():.1e} mm" if len(on_edges)
                      else "no nodes on its edges")
-        ax.set_title(f"face {k}: {rep.nodes} nodes, Δmax {rep.delta_max:.2e}, Δmean {rep.delta_mean:.2e} mm\n"
+        ax.set_title(f"face {k}: {rep.nodes} nodes, Δmax {rep.delta_max:.1e}, Δmean {rep.delta_mean:.1e} mm\n"
                      f"{edge_text}", fontsize=8)
         if len(vals):                                                  # ring the worst node
             worst = int(np.argmax(vals))
