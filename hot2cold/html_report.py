@@ -15,7 +15,7 @@ import html
 import logging
 import math
 import os
-import tempfile
+import secrets
 import time
 from pathlib import Path
 
@@ -250,7 +250,10 @@ def write_html(result, path: str | os.PathLike, scale: float | None = None) -> N
     path = Path(path)
     text = render_html(result, scale)
     folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    # os.open with mode 0o666 (not mkstemp's 0o600): the page gets the permissions the umask gives any new
+    # file, as if written directly
+    tmp = folder / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)

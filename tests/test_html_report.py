@@ -195,6 +195,9 @@ def test_written_atomically_over_an_old_file(blade, mesh, tmp_path, monkeypatch)
     assert dst == path and src.parent == path.parent and src != path and head.startswith("<!DOCTYPE html>")
     assert scales == [25.0] and "<b>25 times</b>" in path.read_text(encoding="utf-8")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report.html"]
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask           # as any new file, not mkstemp's 0o600
 
     def broken(*a, **kw):
         raise RuntimeError("drawing failed")
