@@ -496,7 +496,8 @@ def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh 
         inside = fc.inside
         diff = fc.cold - fc.hot
         norm = _curvature_norm(np.concatenate([fc.hot[inside], fc.cold[inside]]))
-        dmax = float(np.nanpercentile(np.abs(diff[inside]), 99)) if np.isfinite(diff[inside]).any() else 0.0
+        finite = diff[inside][np.isfinite(diff[inside])]
+        dmax = float(np.abs(np.percentile(finite, [1, 99])).max()) if len(finite) else 0.0
         dnorm = TwoSlopeNorm(0.0, -max(dmax, 1e-12), max(dmax, 1e-12))
         panels = ((fc.hot, norm, "hot", "H"), (fc.cold, norm, "cold (morphed)", "H"),
                   (diff, dnorm, "cold − hot", "ΔH"))
