@@ -188,7 +188,7 @@ def render_html(result, scale: float | None = None) -> str:
     :func:`hot2cold.visual.displacement_scale`: the largest displacement drawn as 5 % of the part's size).
     """
     report = result.report
-    scale = visual.displacement_scale(result) if scale is None else visual._check_scale(scale)
+    scale = visual.displacement_scale(result) if scale is None else visual.check_scale(scale)
     clock = time.perf_counter()
     mesh = visual.mesh_of(result)
     overlay = visual.overlay_png(result, scale, mesh=mesh)

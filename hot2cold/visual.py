@@ -74,7 +74,8 @@ def _clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
     return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
 
 
-def _check_scale(scale: float) -> float:
+def check_scale(scale: float) -> float:
+    """``scale`` as a float; ValueError unless it is a positive finite number."""
     scale = float(scale)
     if not np.isfinite(scale) or scale <= 0.0:
         raise ValueError(f"the displacement scale must be a positive number, got {scale!r}")
@@ -236,7 +237,7 @@ def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None
     Each part is rendered shaded and laid over the other translucently (purple where they overlap), and the
     edges of both are drawn on top as lines.  Returns PNG bytes.
     """
-    scale = displacement_scale(result) if scale is None else _check_scale(scale)
+    scale = displacement_scale(result) if scale is None else check_scale(scale)
     mesh = mesh if mesh is not None else mesh_of(result)
     hot = mesh.vertices
     cold = hot + scale * (_cold_vertices(result, mesh) - hot)
