@@ -235,3 +235,14 @@ def test_mixer_lobes(mixer):
 def test_mixer_decomposes(mixer):
     part = decompose(mixer)
     assert len(part.faces) == 6 and len(part.edges) == 12
+
+
+def test_every_face_belongs_to_its_solid():
+    """Part.solids and Face.solid number the faces of the kernel's working copy (a two-solid compound)."""
+    import cadquery as cq
+    from hot2cold.kernel.topology import decompose
+    shape = cq.Compound.makeCompound([cq.Solid.makeBox(1, 2, 3), cq.Solid.makeSphere(1, cq.Vector(5, 0, 0))])
+    part = decompose(shape.wrapped)
+    assert sorted(k for members in part.solids for k in members) == list(range(len(part.faces)))
+    assert [len(m) for m in part.solids] == [6, 1]
+    assert all(part.faces[k].solid == s for s, members in enumerate(part.solids) for k in members)

@@ -209,7 +209,7 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
 
     solid_of_face = np.full(len(faces), -1)
     solid_faces = []
-    for s, solid in enumerate(solids):
+    for s, solid in enumerate(shape_map(work, TopAbs_SOLID)):     # work's solids: its faces are numbered
         members = tuple(face_ids.FindIndex(f) - 1 for f in shape_map(solid, TopAbs_FACE))
         solid_faces.append(members)
         solid_of_face[list(members)] = s
