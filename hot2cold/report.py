@@ -95,6 +95,7 @@ class Report:
     inversion: dict | None = None
     tolerance: float | None = None
     refinements: list[dict] = field(default_factory=list)
+    edge_refinements: list[dict] = field(default_factory=list)
     g1: list[dict] = field(default_factory=list)
 
     @property
@@ -140,12 +141,26 @@ class Report:
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
         for r in self.refinements:
+            change = (f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
+                      if "delta_max_before" in r else f"fit residual {r['residual']:.2e} mm")
             if r["rounds"] == 0:
-                lines.append(f"face {r['face']} misses the tolerance (fit residual {r['residual']:.2e} mm) and "
-                             f"cannot be refined: the rows that refinement would lengthen are tied to edges")
+                why = ("no knot could be placed where its error is" if not r.get("refinable", False)
+                       else "no refinement round was run")
+                lines.append(f"face {r['face']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
-            lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles "
-                         f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds)")
+            degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
+                      if r.get("degree_before", "") != r.get("degree_after", "") else "")
+            lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
+                         f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), {change}")
+        for r in self.edge_refinements:
+            change = f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
+            if r["rounds"] == 0:
+                lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined")
+                continue
+            degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
+                      if r["degree_before"] != r["degree_after"] else "")
+            lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
+                         f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}")
         if self.g1:
             before = max((g["kink_before_max"] for g in self.g1), default=0.0)
             after = max((g["kink_after_max"] for g in self.g1), default=0.0)
@@ -204,6 +219,7 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
                  hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], hot_name: str = "",
                  timings: dict[str, float] | None = None, inversion: dict | None = None,
                  tolerance: float | None = None, refinements: list[dict] | None = None,
+                 edge_refinements: list[dict] | None = None,
                  g1: list[dict] | None = None) -> Report:
     """Assemble the :class:`Report` of a morph."""
     faces = []
@@ -234,4 +250,5 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
         vertex_delta_max=_stats(vertex_err)[0],
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
         faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
-        tolerance=tolerance, refinements=list(refinements or []), g1=list(g1 or []))
+        tolerance=tolerance, refinements=list(refinements or []),
+        edge_refinements=list(edge_refinements or []), g1=list(g1 or []))

@@ -1,9 +1,10 @@
 """Rebuilding the cold part: the morphed poles written into the kernel's working copy.
 
-Only poles move (same degrees, knots and weights; a face refined to meet a tolerance gets the refined
-record's extra knots first, which leaves its shape as it was), and they move in the very geometry objects the
-working copy's faces and edges hold, so the topology of the hot part is kept: every edge is still one edge
-used by both of its faces, every vertex one vertex.  Vertices are moved to the ends of their morphed edges.
+Only poles move (same degrees, knots and weights; a face or edge refined to meet a tolerance first gets the
+refined record's higher degree and extra knots, which leaves its shape as it was), and they move in the very
+geometry objects the working copy's faces and edges hold, so the topology of the hot part is kept: every edge
+is still one edge used by both of its faces, every vertex one vertex.  Vertices are moved to the ends of their
+morphed edges.
 """
 from __future__ import annotations
 
@@ -21,16 +22,28 @@ from .topology import KernelPart
 log = logging.getLogger(__name__)
 
 
-def _insert_missing_knots(surface, record: BSplineSurface) -> None:
-    """Insert into the kernel surface the knots a refined record has and it lacks (shape unchanged)."""
-    for knots, flat, insert in ((record.u_knots, surface.UKnotSequence(), surface.InsertUKnot),
-                                (record.v_knots, surface.VKnotSequence(), surface.InsertVKnot)):
-        have = list(flat)
-        for x in knots:
-            if x in have:
-                have.remove(x)
-            else:
-                insert(float(x), 1, 0.0, True)
+def _insert_missing(flat: list, knots, insert) -> None:
+    have = list(flat)
+    for x in knots:
+        if x in have:
+            have.remove(x)
+        else:
+            insert(float(x), 1, 0.0, True)
+
+
+def _refine_surface(surface, record: BSplineSurface) -> None:
+    """Give the kernel surface the degrees and knots of a refined record (its shape unchanged)."""
+    if record.u_degree > surface.UDegree() or record.v_degree > surface.VDegree():
+        surface.IncreaseDegree(max(record.u_degree, surface.UDegree()), max(record.v_degree, surface.VDegree()))
+    _insert_missing(surface.UKnotSequence(), record.u_knots, surface.InsertUKnot)
+    _insert_missing(surface.VKnotSequence(), record.v_knots, surface.InsertVKnot)
+
+
+def _refine_curve(curve, record: BSplineCurve) -> None:
+    """Give the kernel curve the degree and knots of a refined record (its shape unchanged)."""
+    if record.degree > curve.Degree():
+        curve.IncreaseDegree(record.degree)
+    _insert_missing(curve.KnotSequence(), record.knots, curve.InsertKnot)
 
 
 def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSplineCurve | None],
@@ -48,10 +61,11 @@ def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSp
                           f"got {len(surfaces)} and {len(curves)}")
     try:
         for (surface, trsf), record in zip(kernel.surfaces, surfaces):
-            _insert_missing_knots(surface, record)
+            _refine_surface(surface, record)
             set_surface_poles(surface, record.poles, trsf)
         for entry, record in zip(kernel.curves, curves):
             if entry is not None:
+                _refine_curve(entry[0], record)
                 set_curve_poles(entry[0], record.poles, entry[1])
         builder = BRep_Builder()
         for vertex, point in zip(kernel.vertices, np.asarray(vertices, float)):
