@@ -59,8 +59,8 @@ class Refinement:
     ``missed``: the face missed the tolerance itself (a face may also be refined only because it shares a
     refined edge); ``delta_max_before``/``delta_max_after``: its largest error at its nodes before and after
     (Gauss-Newton distances, see the module docstring); ``residual``: its largest fit residual
-    ``|S_cold(u_k, v_k) - d_k|`` at the nodes at the end; ``refinable`` is False when the face missed but no
-    knot could be placed where its error is.
+    ``|S_cold(u_k, v_k) - d_k|`` at the nodes at the end; ``refinable`` is False when the face still misses
+    and its knot spans there hold too few nodes to be halved (see the module docstring).
     """
 
     face: int
@@ -521,7 +521,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             continue
         s0, s1 = hot.surface, face.surface
         face_reports.append(Refinement(
-            k, missed, ("f", k) not in stuck, int(face_added[k, 0]), int(face_added[k, 1]),
+            k, missed, not (("f", k) in stuck and worst(face_err[k][1]) > tolerance),
+            int(face_added[k, 0]), int(face_added[k, 1]),
             f"{s0.u_degree}x{s0.v_degree}", f"{s1.u_degree}x{s1.v_degree}",
             "x".join(map(str, s0.shape)), "x".join(map(str, s1.shape)), int(face_rounds[k]),
             face_before[k], worst(face_err[k][1]), worst(node_residuals(face, face_morphs[k], cls, field))))
@@ -531,6 +532,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         if edge.degenerate or (not missed and not edge_rounds[e]):
             continue
         edge_reports.append(EdgeRefinement(
-            e, missed, ("e", e) not in stuck, int(edge_added[e]), hot.curve.degree, edge.curve.degree,
+            e, missed, not (("e", e) in stuck and worst(edge_err[e][1]) > tolerance),
+            int(edge_added[e]), hot.curve.degree, edge.curve.degree,
             hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e], worst(edge_err[e][1])))
     return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds)

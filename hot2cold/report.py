@@ -144,23 +144,27 @@ class Report:
             change = (f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
                       if "delta_max_before" in r else f"fit residual {r['residual']:.2e} mm")
             if r["rounds"] == 0:
-                why = ("no knot could be placed where its error is" if not r.get("refinable", False)
+                why = ("too few nodes where its error is to refine it" if not r.get("refinable", False)
                        else "no refinement round was run")
                 lines.append(f"face {r['face']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r.get("degree_before", "") != r.get("degree_after", "") else "")
+            stop = "" if r.get("refinable", True) else "; too few nodes where it still misses to refine further"
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
-                         f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), {change}")
+                         f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), "
+                         f"{change}{stop}")
         for r in self.edge_refinements:
             change = f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
             if r["rounds"] == 0:
-                lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined")
+                why = "too few nodes where its error is to refine it" if not r["refinable"] else "no round was run"
+                lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r["degree_before"] != r["degree_after"] else "")
+            stop = "" if r["refinable"] else "; too few nodes where it still misses to refine further"
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
-                         f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}")
+                         f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
         if self.g1:
             before = max((g["kink_before_max"] for g in self.g1), default=0.0)
             after = max((g["kink_after_max"] for g in self.g1), default=0.0)
