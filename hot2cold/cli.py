@@ -47,8 +47,11 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--invert", action="store_true",
                    help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
     m.add_argument("--tolerance", type=float, metavar="MM",
-                   help="largest accepted error: faces that miss it are refined by knot insertion; exit code 5 "
-                   "when it still is not met")
+                   help="largest accepted error (Δmax of every face and edge): where it is missed, faces and edges "
+                   "are refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted again; "
+                   "exit code 5 when it still is not met")
+    m.add_argument("--max-refinements", type=int, metavar="N",
+                   help="rounds of refinement for --tolerance at the most (default 4)")
     m.add_argument("--node-distance", type=float, metavar="MM",
                    help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     m.add_argument("--edge-distance", type=float, metavar="MM",
@@ -191,8 +194,9 @@ def _morph(args) -> int:
     if args.html:
         _html_writer()
     try:
+        rounds = {} if args.max_refinements is None else {"max_refinements": args.max_refinements}
         settings = Settings(node_distance=args.node_distance, edge_distance=args.edge_distance,
-                            tolerance=args.tolerance)
+                            tolerance=args.tolerance, **rounds)
     except ValueError as exc:
         raise InputError(str(exc)) from exc
     progress = None if args.quiet else _Progress(sys.stderr)

@@ -14,8 +14,8 @@ from typing import Callable
 import numpy as np
 
 from .artificial import FieldEstimator
-from .classify import Classification, classify_nodes
-from .edges import EdgeMorph, morph_edges, vertex_displacements
+from .classify import EDGE, Classification, classify_nodes
+from .edges import EdgeMorph, morph_edge, morph_edges, vertex_displacements
 from .errors import FieldError, MorphError
 from .faces import FaceMorph, morph_face, morph_faces
 from .field import DisplacementField, as_field
@@ -30,7 +30,7 @@ from .kernel.shapes import to_cadquery
 from .kernel.step import write_step
 from .load import load_part
 from .model import Part
-from .refine import refine_face
+from .refine import refine
 from .report import Report, build_report, node_errors
 from .settings import Settings
 
@@ -150,13 +150,30 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     def fit(face):
         return morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away)
 
-    refinements = []
+    refinements, edge_refinements = [], []
     if settings.tolerance is not None:
-        for k, face in enumerate(part.faces):
-            face_morphs[k], refinement = refine_face(face, face_morphs[k], cls, field, settings.tolerance,
-                                                     settings.max_refinements, fit)
-            if refinement is not None:
-                refinements.append(refinement)
+        # Faces and edges refined (knots, cubic degree) where their error misses the tolerance; from here on
+        # ``part`` is the refined hot part (same shape), which ``fit`` and every later step see.
+        def fit_face(part_, face, edges_):
+            return morph_face(face, part_, cls, field, edges_, vertex_disp, estimator, settings, trimmed_away)
+
+        def fit_edges(part_, edges_, refined_edges):
+            edges_ = list(edges_)
+            for e in refined_edges:
+                edge, nodes = part_.edges[e], cls.nodes_of(EDGE, e)
+                edges_[e] = morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
+                                       vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon, e,
+                                       settings.artificial_weight)
+            if tangent:
+                curves, _ = correct_corners(part_, [m.curve for m in edges_], tangent, _KINK_NOISE_DEG,
+                                            decided=edge_decided(part_))
+                edges_ = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edges_, curves)]
+            return edges_
+
+        refined = refine(part, cls, field, face_morphs, edge_morphs, settings.tolerance,
+                         settings.max_refinements, fit_face, fit_edges)
+        part, face_morphs, edge_morphs = refined.part, refined.faces, refined.edges
+        refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
         lap("refine")
     g1_reports = []
     if tangent:
@@ -184,6 +201,7 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=timings, inversion=None if inversion is None else asdict(inversion),
                           tolerance=settings.tolerance, refinements=[asdict(r) for r in refinements],
+                          edge_refinements=[asdict(r) for r in edge_refinements],
                           g1=[asdict(r) for r in g1_reports])
     report_progress("report")
     result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
