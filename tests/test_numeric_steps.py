@@ -88,9 +88,17 @@ def test_sparse_patches_get_a_grid_of_artificial_nodes():
     full = np.column_stack([np.repeat(np.linspace(0.01, 0.49, 4), 3), np.tile(np.linspace(0.01, 0.29, 3), 4)])
     uv = np.concatenate([full, [[0.75, 0.1], [0.25, 0.45]]])   # patch (0, 0) full, two with one node
     nodes = _artificial_parameters(surface, uv)
-    assert len(nodes) == 5 * 4 * 3                      # five patches below 12 data, a 4 x 3 grid each
-    counts = np.histogram2d(nodes[:, 0], nodes[:, 1], bins=[[0, 0.5, 1], [0, 0.3, 0.6, 1]])[0]
+    on_side = np.isin(nodes[:, 0], [0.0, 1.0]) | np.isin(nodes[:, 1], [0.0, 1.0])
+    inner = nodes[~on_side]
+    assert len(inner) == 5 * 4 * 3                       # five patches below 12 data, a 4 x 3 grid each
+    counts = np.histogram2d(inner[:, 0], inner[:, 1], bins=[[0, 0.5, 1], [0, 0.3, 0.6, 1]])[0]
     assert counts.tolist() == [[0, 12, 12], [12, 12, 12]]
+    # the sparse patches along the sides also take their grid's lines on the sides: a side patch's candidates are
+    # (4 or 5) x (3 or 4) instead of 4 x 3; (0, 1) and (1, 1) touch one side (3 more each), the corner patches
+    # (0, 2), (1, 0) and (1, 2) two (5 x 4 - 12 = 8 more each)
+    side = nodes[on_side]
+    assert len(side) == 3 + 8 + 8 + 3 + 8
+    assert not np.any((side[:, 0] == 0.0) & (side[:, 1] < 0.3))         # patch (0, 0) is full: none there
 
 
 def test_trimmed_away_grid_points_become_artificial_nodes():
@@ -98,4 +106,36 @@ def test_trimmed_away_grid_points_become_artificial_nodes():
     uv = np.column_stack([np.repeat(np.linspace(0.01, 0.99, 20), 20), np.tile(np.linspace(0.01, 0.99, 20), 20)])
     assert len(_artificial_parameters(surface, uv)) == 0            # every patch is full
     nodes = _artificial_parameters(surface, uv, trimmed_away=lambda p: p[:, 0] > 0.5)
-    assert len(nodes) == 3 * 4 * 3 and np.all(nodes[:, 0] > 0.5)     # the grids of the three patches u > 0.5
+    assert np.all(nodes[:, 0] > 0.5)
+    # the grids of the three patches u > 0.5 (4 x 3 each), with the domain's side u = 1 and its ends v = 0, 1:
+    # 5 abscissae in u times 3 + 3 + 3 + 2 in v
+    assert len(nodes) == 5 * 11
+    assert np.count_nonzero(nodes[:, 0] == 1.0) == 11 and np.count_nonzero(np.isin(nodes[:, 1], [0.0, 1.0])) == 10
+
+
+def _quadratic_field(p):
+    """Affine plus bilinear and quadratic terms (an untwist about z growing along y, a span-wise stretch)."""
+    x, y, z = p.T
+    return p @ (A - np.eye(3)).T + B + np.column_stack([-1e-4 * y * z, 2e-5 * y ** 2, 1e-4 * y * x])
+
+
+def test_field_estimator_is_exact_for_quadratic_fields():
+    pts = RNG.uniform(0, 10, (300, 3))
+    est = FieldEstimator(pts, _quadratic_field(pts))
+    q = np.array([[15.0, -3.0, 12.0], [5.0, 5.0, 5.0], [0.5, 9.0, 2.0]])
+    assert np.abs(est(q) - _quadratic_field(q)).max() <= 1e-10
+
+
+def test_field_estimator_far_from_a_thin_plate():
+    """Nodes on the two walls (z = -0.5 and 0.5, 0.5 mm apart) of a 30 x 30 mm plate, estimates 10 to 25 mm off
+    it: the 20 nearest nodes of such a point lie on one wall, a cluster a few mm across with no spread across
+    the plate.  A fit over them alone was 0.1 to 0.26 mm off even for an affine field; the neighbourhood that
+    grows with the distance takes both walls and is exact for affine and quadratic fields."""
+    g = np.arange(0.0, 30.01, 0.5)
+    xx, yy = np.meshgrid(g, g, indexing="ij")
+    walls = np.concatenate([np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)]) for z in (-0.5, 0.5)])
+    far = np.array([[15.0, 0.0, 20.0], [15.0, 0.0, 10.0], [5.0, 10.0, 15.0], [30.0, 30.0, 25.0]])
+    affine = FieldEstimator(walls, walls @ A.T + B - walls)
+    assert np.abs(affine(far) - (far @ A.T + B - far)).max() <= 1e-10
+    quadratic = FieldEstimator(walls, _quadratic_field(walls))
+    assert np.abs(quadratic(far) - _quadratic_field(far)).max() <= 1e-10
