@@ -321,12 +321,14 @@ def _morph_with_and_without_g1(shape, field):
 
 
 def test_blade_bundled_field_every_tangent_edge_within_0_01_deg(blade_step):
-    """The bundled blade and field (the CLI sample): the morph alone leaves 0.0129 deg at the corners."""
+    """The bundled blade and field (the CLI sample): every tangent edge within 0.01 deg after G1, never
+    worse than before (the fit alone left 0.0129 deg at the corners before the artificial nodes improved;
+    the block test below keeps a field whose plain fit misses 0.01 deg)."""
     from conftest import SAMPLES
     plain, result = _morph_with_and_without_g1(blade_step, SAMPLES / "twisted_blade_field.csv")
     g1 = result.report.g1
     assert len(g1) == 4 and all(g["corrected"] for g in g1)
-    assert max(g["kink_before_max"] for g in g1) > 0.01
+    assert all(g["kink_after_max"] <= g["kink_before_max"] + 1e-9 for g in g1)
     assert max(g["kink_after_max"] for g in g1) <= 0.01
     # positions: the paper's accuracy is kept, face by face
     for a, b in zip(plain.report.faces, result.report.faces):
