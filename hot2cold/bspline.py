@@ -297,12 +297,9 @@ def curve_derivative_basis(curve: BSplineCurve, t, nu: int = 1) -> _sparse.csr_a
     return _to_csr(start, vals[-1], curve.n_poles)
 
 
-def _surface_rows(surface: BSplineSurface, u, v, nu: int):
-    """Fixed-width tensor-product rows up to first derivatives (``nu`` is 0 or 1).
-
-    Returns the column indices ``cols`` (m, (p+1)(q+1)) and a list of value arrays of that shape: the
-    (rational if weighted) basis and, if ``nu == 1``, its u- and v-derivatives.
-    """
+def _surface_parameters(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters ``u``, ``v`` checked against the surface's domain as two (m,) arrays (a scalar is
+    broadcast to the other's length)."""
     u0, u1, v0, v1 = surface.domain
     uu = _parameters(u, u0, u1, "u")
     vv = _parameters(v, v0, v1, "v")
@@ -314,6 +311,16 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
         else:
             raise ValueError(f"u and v must have the same shape (m,) (or one be a scalar), got {uu.shape} "
                              f"and {vv.shape}")
+    return uu, vv
+
+
+def _surface_rows(surface: BSplineSurface, u, v, nu: int):
+    """Fixed-width tensor-product rows up to first derivatives (``nu`` is 0 or 1).
+
+    Returns the column indices ``cols`` (m, (p+1)(q+1)) and a list of value arrays of that shape: the
+    (rational if weighted) basis and, if ``nu == 1``, its u- and v-derivatives.
+    """
+    uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
     nv = surface.shape[1]
     su, bu = _span_rows(uu, surface.u_knots, p, nu)
@@ -466,17 +473,7 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     Returns ``[A, A_u, A_v, A_uu, A_uv, A_vv]``, each (m, 4): columns 0-2 the weighted point part, column 3
     the weight function ``W`` and its derivatives.
     """
-    u0, u1, v0, v1 = surface.domain
-    uu = _parameters(u, u0, u1, "u")
-    vv = _parameters(v, v0, v1, "v")
-    if uu.shape != vv.shape:
-        if uu.size == 1:
-            uu = np.full(vv.shape, uu[0])
-        elif vv.size == 1:
-            vv = np.full(uu.shape, vv[0])
-        else:
-            raise ValueError(f"u and v must have the same shape (m,) (or one be a scalar), got {uu.shape} "
-                             f"and {vv.shape}")
+    uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
     nu_, nv_ = surface.shape
     su, bu = _span_rows(uu, surface.u_knots, p, 2)
