@@ -78,8 +78,10 @@ def _normalised(knots: np.ndarray) -> np.ndarray:
     return (knots - knots[0]) / (knots[-1] - knots[0])
 
 
-def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tuple[str, bool] | None:
-    """The side a whole edge use runs along, and whether it runs against the side's direction."""
+def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9,
+             whole: bool = True) -> tuple[str, bool] | None:
+    """The side a whole edge use runs along (with ``whole=False``: lies on, whatever part of the side it
+    covers), and whether it runs against the side's direction."""
     u0, u1, v0, v1 = surface.domain
     span = np.array([u1 - u0, v1 - v0])
     for side, (axis, end) in SIDES.items():
@@ -88,7 +90,7 @@ def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tu
         lo, hi = (u0, v0)[along], (u1, v1)[along]
         if np.all(np.abs(use.uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
             a, b = use.uv[0, along], use.uv[-1, along]
-            if min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]:
+            if not whole or (min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]):
                 return side, bool(a > b)
     return None
 

@@ -177,22 +177,6 @@ def _row_mask(shape: tuple[int, int], side: str, second: bool = False) -> np.nda
     return mask
 
 
-def _on_side(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9) -> tuple[str, bool] | None:
-    """The side of the surface's domain an edge use lies on, whole or in part (a trimmed face's edge on
-    the boundary of its untrimmed surface), and whether it runs against the side's direction; else None.
-    The cross derivative along a side depends on the side row and the second row only, whatever part of
-    the side the edge covers."""
-    found = _side_of(surface, use, rel_tol)
-    if found is not None:
-        return found
-    u0, u1, v0, v1 = surface.domain
-    span = np.array([u1 - u0, v1 - v0])
-    for side, (axis, end) in SIDES.items():
-        if np.all(np.abs(use.uv[:, axis] - (u0, u1, v0, v1)[2 * axis + end]) <= rel_tol * span[axis]):
-            return side, bool(use.uv[0, 1 - axis] > use.uv[-1, 1 - axis])
-    return None
-
-
 def _side_row(poles: np.ndarray, side: str, backwards: bool) -> tuple:
     """Index expression of a side's row in a ``(nu, nv, ...)`` array, ordered along the edge."""
     axis, end = SIDES[side]
@@ -246,7 +230,7 @@ def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Fac
 
 
 def _fixed_reason(face: Face, found: tuple[str, bool] | None, tied: tuple[str, ...]) -> str:
-    """Why ``face`` cannot turn about an edge that runs along its side ``found`` (``_on_side``; None when the
+    """Why ``face`` cannot turn about an edge that runs along or lies on its side ``found`` (``_side_of(..., whole=False)``; None when the
     edge is not on a side), or "" when its second row there has poles free to move."""
     if found is None:
         return NOT_ISO_SIDE
@@ -322,7 +306,9 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         uv_a, uv_b = _matched_uv(use_a, use_b)
         matched.append((uv_a, uv_b))
         before.append(_max(kink_angles(surfaces[fa.index], uv_a, surfaces[fb.index], uv_b)))
-        sides = (_on_side(fa.surface, use_a), _on_side(fb.surface, use_b))
+        # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
+        # the side row and the second row only, whatever part of the side the edge covers.
+        sides = (_side_of(fa.surface, use_a, whole=False), _side_of(fb.surface, use_b, whole=False))
         why = [_fixed_reason(face, found, tied_sides[face.index]) for face, found in zip((fa, fb), sides)]
         if all(why):
             reason = why[0] if why[0] == why[1] else "; ".join(why)
