@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import Hot2ColdError, InputError
+from .errors import Hot2ColdError, InputError, OutputError
 from .field import UNITS
 
 log = logging.getLogger("hot2cold")
@@ -176,16 +176,11 @@ def _write_exports(args, result):
     if args.glb:
         yield export.write_glb(result, args.glb, surface)
     if args.html:
-        write_html = _html_writer()
-        try:
-            write_html(result, args.html, scale=args.scale)     # atomic itself
-        except OSError as exc:
-            raise export.OutputError(f"cannot write {args.html}: {exc.strerror or exc}") from exc
+        _html_writer()(result, args.html, scale=args.scale)   # atomic itself; OutputError on failure
         yield args.html
 
 
 def _morph(args) -> int:
-    from .export import OutputError
     from .morph import check_result, morph
     from .settings import Settings
 
@@ -210,10 +205,7 @@ def _morph(args) -> int:
             _write_json_atomically(result.report.to_dict(), args.report)
             written.append(args.report)
         check_result(result)
-        try:
-            result.write_step(args.output)
-        except OSError as exc:
-            raise OutputError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+        result.write_step(args.output)              # atomic; OutputError on failure
         written.append(args.output)
         if not args.quiet:
             print(f"wrote {args.output}")

@@ -36,3 +36,9 @@ class MorphError(Hot2ColdError, RuntimeError):
     """The morph ran but its result is not a valid solid."""
 
     exit_code = 4
+
+
+class OutputError(Hot2ColdError, OSError):
+    """An output file could not be written (nothing of it is left behind)."""
+
+    exit_code = 6

@@ -19,15 +19,13 @@ from __future__ import annotations
 
 import logging
 import os
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from .bspline import evaluate_surface
-from .errors import Hot2ColdError
+from .atomic import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -36,12 +34,6 @@ GLTF_FROM_CAD = np.array([[1.0, 0.0, 0.0, 0.0],
                           [0.0, 0.0, 1.0, 0.0],
                           [0.0, -1.0, 0.0, 0.0],
                           [0.0, 0.0, 0.0, 1.0]]) @ np.diag([1e-3, 1e-3, 1e-3, 1.0])
-
-
-class OutputError(Hot2ColdError, OSError):
-    """An output file could not be written (nothing of it is left behind)."""
-
-    exit_code = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,29 +158,3 @@ def write_glb(result, path: str | os.PathLike, surface: ColdSurface | None = Non
     write_atomically([(path, lambda tmp: mesh.export(tmp, file_type="glb"))])
     log.info("wrote %s (%d triangles, in metres, Y up)", path, len(mesh.faces))
     return path
-
-
-def write_atomically(jobs: list[tuple[Path, Callable[[str], object]]]) -> None:
-    """Run each ``write(tmp)`` of ``jobs`` (path, write) into a temporary file beside its path (with the
-    umask's permissions), then rename them all; on any failure remove the temporaries and raise
-    :class:`OutputError`."""
-    temps, current = [], jobs[0][0] if jobs else None
-    try:
-        for path, write in jobs:
-            current = path
-            folder = path.parent if str(path.parent) else Path(".")
-            # opened with open(): unlike mkstemp's 0600, the file gets the umask's permissions
-            tmp = folder / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-            with open(tmp, "xb"):
-                pass
-            temps.append(tmp)
-            write(str(tmp))
-        for (path, _), tmp in zip(jobs, temps):
-            current = path
-            os.replace(tmp, path)
-    except OSError as exc:
-        raise OutputError(f"cannot write {current}: {exc.strerror or exc}") from exc
-    finally:
-        for tmp in temps:
-            if os.path.exists(tmp):
-                os.unlink(tmp)

@@ -15,12 +15,12 @@ import html
 import logging
 import math
 import os
-import secrets
 import time
 from pathlib import Path
 
 from . import __version__
 from . import visual
+from .atomic import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -245,20 +245,10 @@ def write_html(result, path: str | os.PathLike, scale: float | None = None) -> N
     """Write the report page of ``result`` to ``path`` atomically (a temporary file in the same folder,
     then ``os.replace``): a reader sees the old file or the whole new one, never a part.
 
-    Raises ValueError for a non-positive ``scale``; OSError when the folder cannot be written.
+    Raises ValueError for a non-positive ``scale``; :class:`~hot2cold.errors.OutputError` (an OSError)
+    when the folder cannot be written.
     """
     path = Path(path)
     text = render_html(result, scale)
-    folder = path.parent if str(path.parent) else Path(".")
-    # os.open with mode 0o666 (not mkstemp's 0o600): the page gets the permissions the umask gives any new
-    # file, as if written directly
-    tmp = folder / f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    write_atomically([(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))])
     log.info("wrote %s (%.0f kB)", path, len(text.encode("utf-8")) / 1024)

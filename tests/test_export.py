@@ -14,6 +14,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from hot2cold import export
+from hot2cold.errors import OutputError
 from hot2cold.classify import IGNORED
 from hot2cold.cli import _Progress, main
 from hot2cold.morph import morph
@@ -117,7 +118,7 @@ def test_failed_write_leaves_the_old_files_and_no_temporaries(blade, blade_surfa
         real(path, mesh, file_format=file_format)
 
     monkeypatch.setattr(meshio, "write", full_disk)
-    with pytest.raises(export.OutputError, match="nodes_surface.vtu: No space left on device") as info:
+    with pytest.raises(OutputError, match="nodes_surface.vtu: No space left on device") as info:
         export.write_vtu(blade, nodes, blade_surface)
     assert info.value.exit_code == 6
     assert nodes.read_text() == "old nodes\n"                    # whole or not at all, for the pair

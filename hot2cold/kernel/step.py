@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from pathlib import Path
 
 from OCP.IFSelect import IFSelect_RetDone
@@ -15,6 +14,7 @@ from OCP.TopAbs import TopAbs_SOLID
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS_Shape
 
+from ..atomic import write_atomically
 from ..errors import KernelError, StepReadError
 
 log = logging.getLogger(__name__)
@@ -55,13 +55,10 @@ def write_step(shape: TopoDS_Shape, path: str | os.PathLike) -> None:
     writer = STEPControl_Writer()
     if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
         raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    try:
+
+    def write(tmp: str) -> None:
         if writer.Write(tmp) != IFSelect_RetDone:
             raise KernelError(f"the kernel could not write STEP file {path}")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    write_atomically([(path, write)])
     log.info("wrote %s", path)
