@@ -2,6 +2,7 @@
 
     hot2cold morph HOT.step FIELD.csv -o COLD.step --report REPORT.json [--vtu NODES.vtu] [--stl COLD.stl]
         [--glb COLD.glb] [--html REPORT.html [--scale FACTOR]] [-q | -v]
+    hot2cold batch JOBS.csv|JOBS.toml [--workers N | --scheduler ADDRESS] [--force] [--summary PATH] [-q | -v]
 
 Every output is checked before the morph starts (its folder exists and is writable, it is neither input
 nor another output) and written whole or not at all.
@@ -10,15 +11,21 @@ Exit codes: 0 success; 2 unusable input (file, field, option, output path); 3 ke
 part is not a valid closed solid (nothing written but the report); 5 written, but --tolerance not met;
 6 an output could not be written (none of it is left; the message says what else is written); 70
 internal error; 130 interrupted.
+
+Exit codes of batch: 0 every job ok or skipped (done before from the same inputs); 1 a job failed (the
+others ran; the summary says why); 5 none failed but a job missed its --tolerance; 2 unusable jobs file
+or options (one line, nothing run: a missing column, an unknown option, a bad value, an output twice or
+equal to an input, no folder for an output, --scheduler without the package distributed or out of
+reach); 130 interrupted (the summary lists what was done).
 """
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 from . import __version__
@@ -73,6 +80,25 @@ def _parser() -> argparse.ArgumentParser:
                        help="displacement magnification of the --html pictures (default: chosen by the report)")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     m.add_argument("-v", "--verbose", action="store_true", help="log each step")
+    b = sub.add_parser("batch", help="morph the jobs of a CSV or TOML jobs file, in parallel",
+                       description="Run the morphs listed in JOBS (CSV: a header hot,field,output[,options] and a "
+                       "row per job; TOML: [[jobs]] tables and an optional [defaults] table). Options as for "
+                       "morph: name, report, field_units, field_name, invert, tolerance, max_refinements, "
+                       "node_distance, edge_distance. Relative paths are relative to JOBS' folder. A job whose "
+                       "cold STEP and record (OUTPUT.hot2cold.json) show the same inputs is skipped. Exit code "
+                       "0: all ok or skipped; 1: a job failed; 5: a tolerance missed; 2: unusable JOBS.")
+    b.add_argument("jobs", type=Path, metavar="JOBS", help="jobs file, .csv or .toml")
+    where = b.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="local worker processes (default: one per core)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the jobs on this Dask distributed scheduler (e.g. tcp://10.0.0.5:8786; needs the "
+                       "package distributed and the same paths on its workers)")
+    b.add_argument("--force", action="store_true", help="run every job, also those done before")
+    b.add_argument("--summary", type=Path, metavar="PATH",
+                   help="summary JSON (default: JOBS_summary.json beside JOBS)")
+    b.add_argument("-q", "--quiet", action="store_true", help="no progress and no table; only errors")
+    b.add_argument("-v", "--verbose", action="store_true", help="log each step")
     return parser
 
 
@@ -91,6 +117,28 @@ class _Progress:
                 self.stream.write("\n")
         elif total == 1 or done == total:
             self.stream.write(text + "\n")
+        self.stream.flush()
+
+
+class _BatchProgress:
+    """Jobs done of total on stderr: one rewritten line on a terminal, a line per job otherwise."""
+
+    def __init__(self, stream, total: int):
+        self.stream, self.total, self.done, self.failed = stream, total, 0, 0
+        self.tty = stream.isatty()
+        stream.write(f"batch: 0/{total} jobs done" + ("" if self.tty else "\n"))
+        stream.flush()
+
+    def __call__(self, result: dict) -> None:
+        self.done += 1
+        self.failed += result["status"] == "failed"
+        if self.tty:
+            failed = f" ({self.failed} failed)" if self.failed else ""
+            self.stream.write(f"\r\033[Kbatch: {self.done}/{self.total} jobs done{failed}, last {result['name']}: "
+                              f"{result['status']}" + ("\n" if self.done == self.total else ""))
+        else:
+            self.stream.write(f"batch: {self.done}/{self.total} {result['name']}: {result['status']} "
+                              f"({result['seconds']:.1f} s)\n")
         self.stream.flush()
 
 
@@ -150,17 +198,6 @@ def _html_writer():
     return write_html
 
 
-def _write_json_atomically(data: dict, path: Path) -> None:
-    from .export import write_atomically
-
-    def write(tmp: str) -> None:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2)
-            fh.write("\n")
-
-    write_atomically([(path, write)])
-
-
 def _write_exports(args, result):
     """Write the viewer exports asked for, yielding each path as soon as it is written."""
     from . import export
@@ -181,19 +218,14 @@ def _write_exports(args, result):
 
 
 def _morph(args) -> int:
-    from .morph import check_result, morph
-    from .settings import Settings
+    from .batch import settings_for, tolerance_missed, write_cold
+    from .morph import morph
 
     _check_outputs(args)
     _check_options(args)
     if args.html:
         _html_writer()
-    try:
-        rounds = {} if args.max_refinements is None else {"max_refinements": args.max_refinements}
-        settings = Settings(node_distance=args.node_distance, edge_distance=args.edge_distance,
-                            tolerance=args.tolerance, **rounds)
-    except ValueError as exc:
-        raise InputError(str(exc)) from exc
+    settings = settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance)
     progress = None if args.quiet else _Progress(sys.stderr)
     result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
                    invert=args.invert, progress=progress)
@@ -201,12 +233,8 @@ def _morph(args) -> int:
         print(result.report.table())
     written = args.written = []         # for the messages of a failure or an interruption from here on
     try:
-        if args.report:
-            _write_json_atomically(result.report.to_dict(), args.report)
-            written.append(args.report)
-        check_result(result)
-        result.write_step(args.output)              # atomic; OutputError on failure
-        written.append(args.output)
+        for path in write_cold(result, args.output, args.report):   # report, check, STEP; atomic each
+            written.append(path)
         if not args.quiet:
             print(f"wrote {args.output}")
         for path in _write_exports(args, result):
@@ -215,11 +243,53 @@ def _morph(args) -> int:
                 print(f"wrote {path}")
     except OutputError as exc:
         raise OutputError(f"{exc} ({', '.join(map(str, written)) or 'nothing'} written)") from exc
-    if result.report.tolerance_met is False:
-        print(f"hot2cold: tolerance {args.tolerance} mm not met (Δmax {result.report.delta_max:.3g} mm); "
-              f"the cold part is written", file=sys.stderr)
+    missed = tolerance_missed(result)
+    if missed:
+        print(f"hot2cold: {missed}", file=sys.stderr)
         return 5
     return 0
+
+
+def _batch(args) -> int:
+    from . import batch
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers must be at least 1, got {args.workers}")
+    summary = args.summary or args.jobs.with_name(f"{args.jobs.stem}_summary.json")
+    jobs = batch.read_jobs(args.jobs, summary)
+    backend = {"scheduler": args.scheduler} if args.scheduler else \
+        {"workers": min(args.workers or batch.cores(), len(jobs))}
+    results, start = [], time.perf_counter()
+    running = batch.run_jobs(jobs, workers=args.workers, scheduler=args.scheduler, force=args.force)
+    progress = None if args.quiet else _BatchProgress(sys.stderr, len(jobs))
+
+    def write_summary() -> dict:
+        data = batch.summary(args.jobs, jobs, results, **backend, force=args.force,
+                             wall_seconds=round(time.perf_counter() - start, 2))
+        batch.write_json(data, summary)
+        return data
+
+    try:
+        for result in running:
+            results.append(result)
+            for line in result.get("warnings", []):
+                log.warning("job %s: %s", result["name"], line)
+            if progress:
+                progress(result)
+    except KeyboardInterrupt:
+        if results:
+            write_summary()
+            args.written = [summary]
+        raise
+    data = write_summary()
+    if args.quiet:
+        for r in data["jobs"]:
+            if r["status"] == "failed":
+                print(f"hot2cold: job {r['name']} failed: {r['message']}", file=sys.stderr)
+    else:
+        print(batch.summary_table(data))
+        print(f"wrote {summary}")
+    return data["exit_code"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -243,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args) -> int:
     try:
-        return _morph(args)
+        return _batch(args) if args.command == "batch" else _morph(args)
     except Hot2ColdError as exc:
         print(f"hot2cold: error: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -1,0 +1,265 @@
+"""hot2cold batch: real morphs of the bundled blade (fields subsampled to keep them quick) in the local
+process pool and on a real Dask LocalCluster, skipping what is done, and every refusal of a bad jobs file."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+
+import pytest
+
+from hot2cold import batch
+from hot2cold.cli import main
+from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.step import read_step
+
+from conftest import SAMPLES
+
+
+@pytest.fixture(scope="module")
+def fields(tmp_path_factory):
+    """Two quick fields on the blade: every 4th node of the bundled field, from two offsets (~4800 nodes)."""
+    folder = tmp_path_factory.mktemp("fields")
+    lines = (SAMPLES / "twisted_blade_field.csv").read_text().splitlines()
+    out = []
+    for offset in (0, 2):
+        path = folder / f"op{offset}.csv"
+        path.write_text("\n".join([lines[0]] + lines[1 + offset::4]) + "\n")
+        out.append(path)
+    return out
+
+
+@pytest.fixture
+def project(tmp_path, fields):
+    """A jobs folder: the hot blade, two fields, a folder for the cold parts."""
+    shutil.copy(SAMPLES / "twisted_blade.step", tmp_path / "hot.step")
+    for path in fields:
+        shutil.copy(path, tmp_path / path.name)
+    (tmp_path / "cold").mkdir()
+    return tmp_path
+
+
+def _jobs_csv(folder, rows, header="name,hot,field,output,report"):
+    path = folder / "jobs.csv"
+    path.write_text("\n".join([header] + rows) + "\n")
+    return path
+
+
+THREE_JOBS = ["a,hot.step,op0.csv,cold/a.step,cold/a_report.json",
+              "b,hot.step,op2.csv,cold/b.step,",
+              "c,hot.step,missing.csv,cold/c.step,"]
+
+
+def _valid_step(path):
+    checks = check_solids(read_step(path))
+    return bool(checks) and all(c.valid and c.closed for c in checks)
+
+
+def _summary(path):
+    data = json.loads(path.read_text())
+    return data, {r["name"]: r for r in data["jobs"]}
+
+
+def _check_two_ok_one_failed(project, data, by_name):
+    assert data["exit_code"] == 1 and data["counts"] == {"ok": 2, "failed": 1}
+    assert [r["name"] for r in data["jobs"]] == ["a", "b", "c"]
+    for name in "ab":
+        assert by_name[name]["status"] == "ok" and by_name[name]["exit_code"] == 0
+        assert 0 < by_name[name]["delta_max"] < 1e-3 and by_name[name]["seconds"] > 0
+        assert _valid_step(project / "cold" / f"{name}.step")
+        assert (project / "cold" / f"{name}.step.hot2cold.json").is_file()
+    assert json.loads((project / "cold" / "a_report.json").read_text())["valid"]
+    failed = by_name["c"]
+    assert failed["status"] == "failed" and failed["exit_code"] == 2
+    assert "missing.csv" in failed["message"] and "not found" in failed["message"]
+    assert "\n" not in failed["message"]
+    assert not (project / "cold" / "c.step").exists()
+    assert not list(project.rglob("*.tmp"))
+
+
+def test_pool_runs_skips_done_jobs_and_force_reruns(project, capsys, monkeypatch):
+    jobs = _jobs_csv(project, THREE_JOBS)
+    monkeypatch.chdir(project / "cold")     # relative paths are the jobs file's, not the working folder's
+    start = time.perf_counter()
+    assert main(["batch", str(jobs)]) == 1
+    first = time.perf_counter() - start
+    out, err = capsys.readouterr()
+    data, by_name = _summary(project / "jobs_summary.json")
+    _check_two_ok_one_failed(project, data, by_name)
+    assert data["workers"] == 2 or data["workers"] == min(3, batch.cores())
+    assert "batch: 3/3" in err
+    assert "failed" in out and "missing.csv" in out and "Δmax" in out
+
+    # Re-run: the done jobs are skipped, their files untouched; the failed one runs (and fails) again.
+    stamps = {p: p.stat().st_mtime_ns for p in (project / "cold").iterdir()}
+    start = time.perf_counter()
+    assert main(["batch", str(jobs), "-q"]) == 1
+    again = time.perf_counter() - start
+    out, err = capsys.readouterr()
+    assert out == "" and err.strip().splitlines() == [
+        f"hot2cold: job c failed: {by_name['c']['message']}"]
+    data, by_name = _summary(project / "jobs_summary.json")
+    assert [by_name[n]["status"] for n in "abc"] == ["skipped", "skipped", "failed"]
+    assert by_name["a"]["delta_max"] == pytest.approx(data["jobs"][0]["delta_max"])
+    assert {p: p.stat().st_mtime_ns for p in (project / "cold").iterdir()} == stamps
+    assert again < first
+
+    # Without the failing job everything is skipped: exit 0, and no worker is started at all.
+    ok_jobs = _jobs_csv(project, THREE_JOBS[:2])
+    start = time.perf_counter()
+    assert main(["batch", str(ok_jobs), "-q", "--summary", str(project / "ok.json")]) == 0
+    assert time.perf_counter() - start < 2.0
+    assert _summary(project / "ok.json")[0]["counts"] == {"skipped": 2}
+
+    # --force runs them again.
+    assert main(["batch", str(ok_jobs), "--force", "-q", "--workers", "1"]) == 0
+    data, by_name = _summary(project / "jobs_summary.json")
+    assert data["workers"] == 1 and [by_name[n]["status"] for n in "ab"] == ["ok", "ok"]
+    for name in "ab":
+        path = project / "cold" / f"{name}.step"
+        assert path.stat().st_mtime_ns > stamps[path] and _valid_step(path)
+
+
+def test_dask_local_cluster_runs_a_toml_jobs_file(project, capsys):
+    from distributed import LocalCluster
+
+    jobs = project / "jobs.toml"
+    jobs.write_text('[defaults]\nhot = "hot.step"\nfield-units = "mm"\n\n'
+                    '[[jobs]]\nname = "a"\nfield = "op0.csv"\noutput = "cold/a.step"\nreport = "cold/a_report.json"\n\n'
+                    '[[jobs]]\nname = "b"\nfield = "op2.csv"\noutput = "cold/b.step"\n\n'
+                    '[[jobs]]\nname = "c"\nfield = "missing.csv"\noutput = "cold/c.step"\n')
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        start = time.perf_counter()
+        assert main(["batch", str(jobs), "--scheduler", cluster.scheduler_address]) == 1
+        seconds = time.perf_counter() - start
+        data, by_name = _summary(project / "jobs_summary.json")
+        _check_two_ok_one_failed(project, data, by_name)
+        assert data["scheduler"] == cluster.scheduler_address
+        workers = {by_name[n]["worker"].split(":")[1] for n in "abc"}
+        assert str(os.getpid()) not in workers          # the jobs ran in the cluster's worker processes
+        # the done jobs are skipped on the cluster too
+        assert main(["batch", str(jobs), "--scheduler", cluster.scheduler_address, "-q"]) == 1
+        assert [r["status"] for r in _summary(project / "jobs_summary.json")[0]["jobs"]] == \
+            ["skipped", "skipped", "failed"]
+    print(f"dask LocalCluster: 3 jobs in {seconds:.1f} s", file=sys.stderr)
+
+
+def test_scheduler_without_distributed_is_refused(project, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)    # what `import distributed` meets uninstalled
+    jobs = _jobs_csv(project, THREE_JOBS[:1])
+    assert main(["batch", str(jobs), "--scheduler", "tcp://127.0.0.1:8786"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("hot2cold: error: ") and "distributed" in err[0]
+    assert not (project / "cold" / "a.step").exists() and not (project / "jobs_summary.json").exists()
+
+
+@pytest.mark.parametrize("header, rows, words", [
+    ("name,hot,output", ["a,hot.step,cold/a.step"], ["missing column 'field'"]),
+    ("hot,field,output,tolerence", ["hot.step,op0.csv,cold/a.step,1e-3"], ["unknown column 'tolerence'"]),
+    ("hot,field,output", ["hot.step,op0.csv,cold/a.step", "hot.step,op2.csv,cold/../cold/a.step"],
+     ["line 3", "also the output of"]),
+    ("hot,field,output", ["hot.step,op0.csv,cold/a.step", "hot.step,op2.csv,op0.csv"],
+     ["line 3", "the field of", "must not overwrite an input"]),
+    ("hot,field,output,report", ["hot.step,op0.csv,cold/a.step,hot.step"], ["report", "must not overwrite"]),
+    ("hot,field,output,tolerance", ["hot.step,op0.csv,cold/a.step,-1"], ["line 2", "tolerance"]),
+    ("hot,field,output,invert", ["hot.step,op0.csv,cold/a.step,maybe"], ["invert"]),
+    ("hot,field,output,field_units", ["hot.step,op0.csv,cold/a.step,inch"], ["field_units"]),
+    ("hot,field,output", ["hot.step,op0.csv,nowhere/a.step"], ["nowhere", "does not exist"]),
+    ("hot,field,output", ["hot.step,,cold/a.step"], ["line 2", "no field"]),
+    ("hot,field,output", [], ["no job"]),
+    ("name,hot,field,output", ["a,hot.step,op0.csv,cold/a.step", "a,hot.step,op2.csv,cold/b.step"],
+     ["line 3", "name 'a'"]),
+    ("hot,field,output", ["hot.step,op0.csv,cold/a.step,extra"], ["4 cells but 3 columns"]),
+])
+def test_bad_jobs_file_is_refused_before_anything_runs(project, capsys, header, rows, words):
+    jobs = _jobs_csv(project, rows, header)
+    assert main(["batch", str(jobs)]) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hot2cold: error: "), lines
+    for word in words:
+        assert word in lines[0]
+    assert out == "" and not list((project / "cold").iterdir()) and not (project / "jobs_summary.json").exists()
+
+
+@pytest.mark.parametrize("text, words", [
+    ('[[jobs]]\nhot = "hot.step"\nfield = "op0.csv"\noutput = "cold/a.step"\nspeed = 3\n', ["job 1", "'speed'"]),
+    ('[defaults]\nhot = "hot.step"\n[[jobs]]\nfield = "op0.csv"\n', ["job 1", "missing option 'output'"]),
+    ('[job]\nhot = "hot.step"\n', ["unknown table 'job'"]),
+    ('[[jobs]]\nhot = "hot.step"\nfield = \n', ["not valid TOML"]),
+])
+def test_bad_toml_jobs_file_is_refused(project, capsys, text, words):
+    jobs = project / "jobs.toml"
+    jobs.write_text(text)
+    assert main(["batch", str(jobs), "--summary", str(project / "s.json")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+    assert not (project / "s.json").exists()
+
+
+def test_csv_and_toml_give_the_same_jobs(project):
+    csv_jobs = batch.read_jobs(_jobs_csv(project, ["a,hot.step,op0.csv,cold/a.step,cold/a.json,m,true,1e-3,2"],
+                                         "name,hot,field,output,report,field-units,invert,tolerance,"
+                                         "max_refinements"))
+    toml = project / "jobs.toml"
+    toml.write_text('[defaults]\nfield_units = "m"\ninvert = true\n\n[[jobs]]\nname = "a"\nhot = "hot.step"\n'
+                    'field = "op0.csv"\noutput = "cold/a.step"\nreport = "cold/a.json"\ntolerance = 1e-3\n'
+                    'max-refinements = 2\n')
+    assert batch.read_jobs(toml) == csv_jobs
+    assert set(batch._CONVERT) == set(batch.OPTIONS)        # every option of a Job is read
+    job = csv_jobs[0]
+    assert job.hot == project / "hot.step" and job.report == project / "cold" / "a.json"
+    assert (job.field_units, job.invert, job.tolerance, job.max_refinements) == ("m", True, 1e-3, 2)
+    assert job.settings().tolerance == 1e-3
+
+
+def test_stale_or_half_written_output_is_not_skipped(project):
+    """The record vouches for the outputs only while inputs, options and outputs are what it states."""
+    (job,) = batch.read_jobs(_jobs_csv(project, THREE_JOBS[:1]))
+    assert batch.done_before(job) is None
+    result = batch.run_job(job)
+    assert result["status"] == "ok" and result["warnings"] == []
+    assert batch.done_before(job)["status"] == "ok"
+
+    step = job.output.read_bytes()
+    job.output.write_bytes(step[: len(step) // 2])              # a half-written (or replaced) STEP
+    assert batch.done_before(job) is None
+    job.output.write_bytes(step)
+    assert batch.done_before(job) is not None
+
+    field = job.field.read_bytes()
+    job.field.write_bytes(field.replace(b"0.0", b"0.1", 1))     # the field changed since
+    assert batch.done_before(job) is None
+    job.field.write_bytes(field)
+    assert batch.done_before(job) is not None
+
+    from dataclasses import replace
+    assert batch.done_before(replace(job, tolerance=1e-3)) is None    # other options
+    job.report.unlink()                                            # an output missing
+    assert batch.done_before(job) is None
+
+    # A run that fails removes the record: the old STEP is no longer vouched for.
+    bad = replace(job, field=project / "missing.csv")
+    assert batch.run_job(bad)["status"] == "failed" and not job.record.exists()
+    assert batch.done_before(job) is None
+
+
+def _crash_or_quick(job):
+    """A runner for the pool's crash handling: the job named "crash" kills its worker, the others are
+    recorded ok at once (no morph: this is about the pool)."""
+    if job.name == "crash":
+        os._exit(3)
+    return batch._result(job, "ok", 0, seconds=0.01)
+
+
+def test_a_worker_that_dies_fails_its_job_only(project):
+    jobs = batch.read_jobs(_jobs_csv(project, [f"{n},hot.step,op0.csv,cold/{n}.step," for n in
+                                               ("x", "crash", "y", "z")]))
+    results = {r["name"]: r for r in batch.run_jobs(jobs, workers=2, runner=_crash_or_quick)}
+    assert set(results) == {"x", "crash", "y", "z"}
+    assert results["crash"]["status"] == "failed" and results["crash"]["exit_code"] == batch.DIED
+    assert "worker process died" in results["crash"]["message"]
+    assert all(results[n]["status"] == "ok" for n in "xyz")
