@@ -417,9 +417,10 @@ def run_job(job: Job) -> dict:
 
     Never raises for the job's own failure: the result dict says ``status`` (ok, tolerance-missed,
     failed), ``exit_code`` (that of ``hot2cold morph``), ``message`` (one line), ``delta_max`` (mm),
-    ``seconds``, ``warnings`` (the hot2cold log warnings) and ``worker`` (host:pid).
+    ``seconds`` (wall), ``cpu_seconds`` (the worker process's, when it ran), ``warnings`` (the hot2cold log
+    warnings) and ``worker`` (host:pid).
     """
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     warnings = _Warnings()
     logger = logging.getLogger("hot2cold")
     logger.addHandler(warnings)
@@ -438,7 +439,7 @@ def run_job(job: Job) -> dict:
         missed = tolerance_missed(result)
         status, code = ("tolerance-missed", 5) if missed else ("ok", 0)
         out = _result(job, status, code, missed or "", result.report.delta_max, time.perf_counter() - start,
-                      **where)
+                      cpu_seconds=round(time.process_time() - cpu, 3), **where)
         if inputs is not None:
             made = {what: _digest(path) for what, path in job.outputs()[:-1]}
             write_json({"inputs": inputs, "outputs": made, "paths": {w: str(p) for w, p in job.outputs()},
@@ -598,9 +599,13 @@ def _on_dask(jobs: list[Job], address: str, runner, Client, as_completed) -> Ite
 # The summary
 # --------------------------------------------------------------------------------------------------------
 def exit_code(results: list[dict]) -> int:
-    """1 when a job failed, else 5 when a job missed its tolerance, else 0 (all ok or skipped)."""
+    """130 when a job was not run (interrupted), else 1 when a job failed, else 5 when a job missed its
+    tolerance, else 0 (all ok or skipped)."""
     statuses = {r["status"] for r in results}
-    return 1 if "failed" in statuses else 5 if "tolerance-missed" in statuses else 0
+    for status, code in (("not-run", 130), ("failed", 1), ("tolerance-missed", 5)):
+        if status in statuses:
+            return code
+    return 0
 
 
 def summary(jobs_file: str | os.PathLike, jobs: list[Job], results: list[dict], **info) -> dict:

@@ -277,9 +277,8 @@ def _batch(args) -> int:
             if progress:
                 progress(result)
     except KeyboardInterrupt:
-        if results:
-            write_summary()
-            args.written = [summary]
+        write_summary()                 # the jobs done so far, the others "not-run"
+        args.written = [summary]
         raise
     data = write_summary()
     if args.quiet:

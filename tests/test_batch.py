@@ -7,6 +7,7 @@ import os
 import shutil
 import sys
 import time
+from dataclasses import replace
 
 import pytest
 
@@ -236,7 +237,6 @@ def test_stale_or_half_written_output_is_not_skipped(project):
     job.field.write_bytes(field)
     assert batch.done_before(job) is not None
 
-    from dataclasses import replace
     assert batch.done_before(replace(job, tolerance=1e-3)) is None    # other options
     job.report.unlink()                                            # an output missing
     assert batch.done_before(job) is None
@@ -263,3 +263,19 @@ def test_a_worker_that_dies_fails_its_job_only(project):
     assert results["crash"]["status"] == "failed" and results["crash"]["exit_code"] == batch.DIED
     assert "worker process died" in results["crash"]["message"]
     assert all(results[n]["status"] == "ok" for n in "xyz")
+
+
+def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
+    (job,) = batch.read_jobs(_jobs_csv(project, ["t,hot.step,op0.csv,cold/t.step,"]))
+    job = replace(job, tolerance=1e-9, max_refinements=0)
+    result = batch.run_job(job)
+    assert result["status"] == "tolerance-missed" and result["exit_code"] == 5
+    assert "not met" in result["message"] and result["delta_max"] > 1e-9
+    assert _valid_step(job.output)
+    record = batch.done_before(job)
+    assert record["status"] == "tolerance-missed"
+    assert batch.skipped(job, record)["message"] == "done before (tolerance-missed); inputs unchanged"
+    assert batch.exit_code([result]) == 5
+    assert batch.exit_code([result, {"status": "failed"}]) == 1
+    assert batch.exit_code([{"status": "skipped"}, {"status": "ok"}]) == 0
+    assert batch.exit_code([result, {"status": "not-run"}]) == 130
