@@ -11,9 +11,14 @@ needs full rank):
 The paper writes ``(s - 1)`` for its ``s - 1`` rows; here ``s`` is simply the number of rows of ``A``.  The
 result is the minimum-norm least-squares solution of the problem with the small singular values removed:
 undetermined combinations of unknowns are set to zero instead of blowing up.
+
+A face may receive several hundred thousand FE nodes, so a tall ``A`` is never held densely: its rows are
+reduced block by block to the triangular factor of a QR decomposition (:func:`solve_tsvd`), and only that
+``(n, n)`` factor is decomposed by SVD.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +26,16 @@ import scipy.linalg
 import scipy.sparse
 
 from .settings import FLT_EPSILON
+
+log = logging.getLogger(__name__)
+
+#: Default size (bytes) of the dense row block reduced at a time by :func:`solve_tsvd`.
+BLOCK_BYTES = 16 * 2 ** 20
+#: Rows per block are about this many times the block's column count (when the byte budget allows):
+#: the triangular factor stacked on top of every block costs ``1 / ROWS_PER_COLUMN`` extra work.
+ROWS_PER_COLUMN = 4
+#: Fewest rows per block by default (a block of very short rows would make the loop over blocks dominate).
+MIN_BLOCK_ROWS = 1024
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,17 +79,124 @@ def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return scipy.linalg.svd(a, full_matrices=False, check_finite=False, lapack_driver="gesvd")
 
 
-def solve_tsvd(A, B, epsilon: float = FLT_EPSILON) -> TsvdSolution:
+class _Rows:
+    """Row access to ``A`` (s, n), dense or CSR: the column extent of every row and dense blocks of rows.
+
+    ``first`` and ``last`` (s,) int are the first and last column holding a stored entry (sparse) or a
+    non-zero (dense) of each row; ``empty`` (s,) bool marks rows without any, for which both are 0.
+    """
+
+    def __init__(self, A, n: int, chunk_bytes: int):
+        if scipy.sparse.issparse(A):
+            csr = scipy.sparse.csr_array(A)  # no copy of a CSR input; its indices may be unsorted or repeated
+            self.dense = None
+            self.indptr = csr.indptr.astype(np.int64, copy=False)
+            self.indices = csr.indices
+            self.data = np.asarray(csr.data, dtype=float)
+            if not np.all(np.isfinite(self.data)):
+                raise ValueError(f"A {csr.shape} holds NaN or inf")
+            counts = np.diff(self.indptr)
+            self.empty = counts == 0
+            self.first = np.zeros(len(counts), np.int64)
+            self.last = np.zeros(len(counts), np.int64)
+            full = ~self.empty
+            if full.any():
+                starts = self.indptr[:-1][full]
+                self.first[full] = np.minimum.reduceat(self.indices, starts)
+                self.last[full] = np.maximum.reduceat(self.indices, starts)
+        else:
+            a = np.asarray(A)
+            self.dense = a
+            s = a.shape[0]
+            self.first = np.zeros(s, np.int64)
+            self.last = np.zeros(s, np.int64)
+            self.empty = np.zeros(s, bool)
+            step = max(1, chunk_bytes // max(8 * n, 1))
+            for i in range(0, s, step):  # chunked, so that the temporaries stay within the block budget
+                block = np.asarray(a[i:i + step], dtype=float)
+                if not np.all(np.isfinite(block)):
+                    raise ValueError(f"A {a.shape} holds NaN or inf")
+                nz = block != 0
+                self.empty[i:i + step] = ~nz.any(axis=1)
+                self.first[i:i + step] = np.argmax(nz, axis=1)
+                self.last[i:i + step] = n - 1 - np.argmax(nz[:, ::-1], axis=1)
+
+    def block(self, rows: np.ndarray, lo: int, width: int, out: np.ndarray) -> None:
+        """Write columns ``lo .. lo + width - 1`` of ``rows`` (m,) into ``out`` (m, width) (repeated sparse
+        entries summed); every stored entry of those rows must lie in these columns."""
+        if self.dense is not None:
+            out[:] = self.dense[rows, lo:lo + width]
+            return
+        begin, end = self.indptr[rows], self.indptr[rows + 1]
+        counts = end - begin
+        offsets = np.cumsum(counts) - counts
+        where = np.repeat(begin - offsets, counts) + np.arange(int(counts.sum()))
+        flat = np.repeat(np.arange(len(rows)) * width, counts) + (self.indices[where] - lo)
+        out[:] = np.bincount(flat, weights=self.data[where], minlength=len(rows) * width).reshape(len(rows), width)
+
+
+def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | None,
+                       block_bytes: int) -> np.ndarray:
+    """``[R | C]`` (n, n + k) with ``R`` upper triangular and ``Q^T [A | B] = [R | C; 0 | D]`` for some
+    orthogonal ``Q``: the QR factor of the augmented matrix, computed block by block.
+
+    Rows of ``A`` are taken in the order of their first column, ``block_rows`` at a time (default: sized from
+    ``block_bytes``).  A block whose rows hold entries only in columns ``lo .. hi`` changes only the rows and
+    columns ``lo .. hi`` of ``R`` (and the rows ``lo .. hi`` of ``C``) as long as no earlier row reaches beyond
+    ``hi`` from there: the QR of the stacked ``[R[lo:hi+1, lo:hi+1], C[lo:hi+1]; A_block, B_block]`` then
+    updates them (Householder reflections of the columns before ``lo`` are the identity, since ``R`` is
+    triangular and the block is zero there).  For a B-spline design matrix a row's entries span a band
+    (``p nv + q + 1`` columns for a surface with its poles numbered ``i nv + j``), so each block costs
+    ``O(m w^2)`` with ``w`` about that band rather than ``n``; a dense matrix has ``w = n``.  The rows below
+    ``n`` of the QR factor (the residual) are dropped as they come: they do not enter ``R`` or ``C``.
+    """
+    k = b.shape[1]
+    rc = np.zeros((n, n + k))
+    reach = np.full(n, -1, np.int64)       # reach[i]: last column of a stored entry in row i of R (-1: none)
+    keep = np.flatnonzero(~rows.empty)      # rows of zeros move only the residual
+    order = keep[np.argsort(rows.first[keep], kind="stable")]
+    first, last = rows.first[order], rows.last[order]
+    if block_rows is None:
+        width = int(np.median(last - first)) + 1 if len(order) else 1
+        block_rows = max(MIN_BLOCK_ROWS, ROWS_PER_COLUMN * (width + k))
+        block_rows = max(1, min(block_rows, block_bytes // (8 * (width + k))))
+    blocks, widest = 0, 0
+    for i in range(0, len(order), block_rows):
+        j = min(i + block_rows, len(order))
+        lo = int(first[i])
+        hi = max(int(last[i:j].max()), int(reach[lo:].max()))
+        w = hi - lo + 1
+        window = np.zeros((w + j - i, w + k), order="F")
+        window[:w, :w] = rc[lo:hi + 1, lo:hi + 1]
+        window[:w, w:] = rc[lo:hi + 1, n:]
+        rows.block(order[i:j], lo, w, window[w:, :w])
+        window[w:, w:] = b[order[i:j]]
+        (_, _), r = scipy.linalg.qr(window, mode="raw", overwrite_a=True, check_finite=False)
+        rc[lo:hi + 1, lo:hi + 1] = r[:w, :w]
+        rc[lo:hi + 1, n:] = r[:w, w:]
+        reach[lo:hi + 1] = hi
+        blocks, widest = blocks + 1, max(widest, w)
+    log.debug("blockwise QR of %d rows x %d columns: %d blocks of %d rows, widest %d columns",
+              len(rows.first), n, blocks, block_rows, widest)
+    return rc
+
+
+def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, block_rows: int | None = None,
+               block_bytes: int = BLOCK_BYTES) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
 
     Parameters
     ----------
     A : (s, n) dense array or ``scipy.sparse`` matrix/array, the design matrix (s observations, n unknowns).
-        It is densified: the problems of the morph are a few thousand rows by at most a few thousand
-        columns.
+        A tall ``A`` is read a block of rows at a time (a sparse one densified block by block), so ``s`` may
+        be in the millions: memory is ``O(n^2)`` plus one block.
     B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation.
     epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * s * epsilon``; default the
         paper's FLT_EPSILON (single precision, about 1.2e-7).
+    block_rows : int > 0 or None, rows of ``A`` reduced at a time; None sizes the blocks from ``block_bytes``
+        (about ``ROWS_PER_COLUMN`` times the columns a block touches, at least ``MIN_BLOCK_ROWS``).  It
+        changes the rounding, not the result.
+    block_bytes : int, memory budget of one dense block when ``block_rows`` is None.
 
     Returns
     -------
@@ -82,11 +204,13 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON) -> TsvdSolution:
 
     Method
     ------
-    ``A^T A`` and its inverse are never formed.  For a tall ``A`` (s > n) an economic QR ``A = Q R`` (Q (s, n)
-    with orthonormal columns, R (n, n)) is computed first, and then the SVD of the small ``R = U_R Sigma V^T``:
-    since Q is orthonormal, ``A = (Q U_R) Sigma V^T`` is an SVD of A with the same singular values, at the
-    cost of an SVD of an n x n instead of an s x n matrix; ``U^T B = U_R^T (Q^T B)``.  For a square or wide
-    ``A`` the SVD is taken directly.  Singular values ``sigma_i <= cutoff`` are dropped.
+    ``A^T A`` and its inverse are never formed.  For a tall ``A`` (s > n) the QR factor of the augmented
+    matrix ``[A | B] = Q [R | C; 0 | D]`` (R (n, n) upper triangular, ``C = Q^T B`` in its first n rows) is
+    built block by block of rows (:func:`_triangular_factor`), without ever holding Q or all of ``A``, and
+    then the SVD of the small ``R = U_R Sigma V^T`` is taken: since Q is orthogonal, ``A = (Q U_R) Sigma V^T``
+    is an SVD of A with the same singular values, at the cost of an SVD of an n x n instead of an s x n
+    matrix; ``U^T B = U_R^T C``.  For a square or wide ``A`` the SVD is taken directly.  Singular values
+    ``sigma_i <= cutoff`` are dropped.
 
     Edge cases: ``n == 0`` gives an empty ``x`` (0, k); ``s == 0`` (no observations) gives ``x = 0`` with
     ``rank == 0``.  An all-zero ``A`` gives ``x = 0``, ``rank == 0``.
@@ -94,21 +218,20 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON) -> TsvdSolution:
     if scipy.sparse.issparse(A):
         if A.ndim != 2:
             raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
-        a = A.toarray().astype(float, copy=False)
     else:
-        a = np.array(A, dtype=float)  # a private copy: QR may overwrite it
-        if a.ndim != 2:
-            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {a.shape}")
+        A = np.asarray(A)
+        if A.ndim != 2:
+            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
     b = np.asarray(B, dtype=float)
     if b.ndim not in (1, 2):
         raise ValueError(f"B must be (s,) or (s, k), got shape {b.shape}")
-    s, n = a.shape
+    s, n = A.shape
     if b.shape[0] != s:
-        raise ValueError(f"A is {a.shape} but B is {b.shape}: B needs {s} rows, one per row of A")
+        raise ValueError(f"A is {A.shape} but B is {b.shape}: B needs {s} rows, one per row of A")
     if not (np.isfinite(epsilon) and epsilon > 0):
         raise ValueError(f"epsilon must be positive and finite, got {epsilon!r}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"A {a.shape} holds NaN or inf")
+    if block_rows is not None and block_rows < 1:
+        raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
     if not np.all(np.isfinite(b)):
         raise ValueError(f"B {b.shape} holds NaN or inf")
 
@@ -120,12 +243,16 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON) -> TsvdSolution:
         x = np.zeros((n, k))
         return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
-
     if s > n:
-        q, r = scipy.linalg.qr(a, mode="economic", overwrite_a=True, check_finite=False)
-        ur, sigma, vt = _svd(r)
-        utb = ur.T @ (q.T @ b2)
+        rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
+        rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
+        ur, sigma, vt = _svd(rc[:, :n])
+        utb = ur.T @ rc[:, n:]
     else:
+        a = A.toarray() if scipy.sparse.issparse(A) else A
+        a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"A {a.shape} holds NaN or inf")
         u, sigma, vt = _svd(a)
         utb = u.T @ b2
 

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import scipy.sparse
 
+from hot2cold.bspline import BSplineCurve, BSplineSurface, curve_basis, surface_basis
 from hot2cold.lstsq import TsvdSolution, solve_tsvd
 from hot2cold.settings import FLT_EPSILON
 
@@ -159,3 +160,131 @@ def test_shape_errors():
         solve_tsvd(np.eye(3), np.ones(3), epsilon=0.0)
     with pytest.raises(ValueError):
         solve_tsvd(scipy.sparse.csr_array(np.ones((4, 2))), np.ones((3, 1)))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The blockwise QR: every block size, sparse or dense, gives what one SVD of the dense A gives.
+# ----------------------------------------------------------------------------------------------------------
+
+def _dense_reference(a: np.ndarray, b: np.ndarray, epsilon: float = FLT_EPSILON):
+    """Truncated-SVD solution, rank, singular values and condition from ``numpy.linalg.svd`` of dense ``a``."""
+    u, sv, vt = np.linalg.svd(a, full_matrices=False)
+    rank = int(np.count_nonzero(sv > sv[0] * a.shape[0] * epsilon))
+    b2 = b.reshape(len(b), -1)
+    x = vt[:rank].T @ ((u[:, :rank].T @ b2) / sv[:rank, None])
+    return x.reshape((a.shape[1],) + b.shape[1:]), rank, sv, sv[0] / sv[rank - 1]
+
+
+def _assert_matches_reference(sol: TsvdSolution, a: np.ndarray, b: np.ndarray):
+    x, rank, sv, condition = _dense_reference(a, b)
+    assert sol.x.shape == x.shape
+    assert sol.rank == rank and sol.n_unknowns == a.shape[1]
+    np.testing.assert_allclose(sol.x, x, rtol=0, atol=1e-12 * np.abs(x).max())
+    np.testing.assert_allclose(sol.singular_values, sv, rtol=1e-12, atol=1e-12 * sv[0])
+    assert sol.condition == pytest.approx(condition, rel=1e-10)
+    assert sol.cutoff == pytest.approx(sv[0] * a.shape[0] * FLT_EPSILON, rel=1e-12)
+
+
+def _curve(n_poles: int, degree: int = 3) -> BSplineCurve:
+    knots = np.r_[np.zeros(degree), np.linspace(0.0, 1.0, n_poles - degree + 1), np.ones(degree)]
+    return BSplineCurve(np.zeros((n_poles, 3)), knots, degree)
+
+
+def _surface(nu: int, nv: int, degree: int = 3) -> BSplineSurface:
+    def knots(n):
+        return np.r_[np.zeros(degree), np.linspace(0.0, 1.0, n - degree + 1), np.ones(degree)]
+    return BSplineSurface(np.zeros((nu, nv, 3)), knots(nu), knots(nv), degree, degree)
+
+
+# 211 rows (a prime: every block size below leaves a partial last block), 17 columns
+_BLOCKS = [None, 1, 5, 16, 17, 64, 211, 500]
+_FORMATS = ["dense", "csr", "csc", "coo"]
+
+
+def _as_format(a: np.ndarray, fmt: str):
+    return a if fmt == "dense" else scipy.sparse.csr_array(a).asformat(fmt)
+
+
+@pytest.mark.parametrize("block_rows", _BLOCKS)
+@pytest.mark.parametrize("fmt", _FORMATS)
+@pytest.mark.parametrize("k", [None, 1, 3])
+def test_blocks_match_dense_svd_on_a_random_tall_problem(block_rows, fmt, k):
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(211, 17))
+    a[rng.random(a.shape) < 0.5] = 0.0                    # sparse rows of all widths, in no order
+    a += np.eye(211, 17)
+    b = rng.normal(size=211 if k is None else (211, k))
+    sol = solve_tsvd(_as_format(a, fmt), b, block_rows=block_rows)
+    assert sol.rank == 17 and not sol.rank_deficient
+    _assert_matches_reference(sol, a, b)
+
+
+@pytest.mark.parametrize("block_rows", [None, 1, 7, 13, 40, 1000])
+@pytest.mark.parametrize("fmt", ["dense", "csr"])
+@pytest.mark.parametrize("k", [None, 1, 3])
+def test_blocks_match_dense_svd_on_a_curve_with_an_empty_stretch(block_rows, fmt, k):
+    # cubic, 10 spans of 0.1: no data in [0.3, 0.7] leaves the basis function on exactly those four spans
+    # without a row (a zero column) and its neighbours barely determined
+    curve = _curve(13)
+    rng = np.random.default_rng(12)
+    t = rng.uniform(0.0, 1.0, 400)
+    t = t[(t < 0.3) | (t > 0.7)]
+    a = curve_basis(curve, t).toarray()
+    b = np.column_stack([np.sin(3 * t), t ** 2, np.ones_like(t)])[:, :k or 1]
+    b = b[:, 0] if k is None else b
+    sol = solve_tsvd(_as_format(a, fmt), b, block_rows=block_rows)
+    assert sol.rank_deficient
+    _assert_matches_reference(sol, a, b)
+
+
+@pytest.mark.parametrize("block_rows", [None, 3, 30, 97, 5000])
+@pytest.mark.parametrize("fmt", ["dense", "csr", "coo"])
+@pytest.mark.parametrize("k", [None, 3])
+def test_blocks_match_dense_svd_on_a_surface_with_an_empty_patch(block_rows, fmt, k):
+    # bicubic, 10 x 6 spans; no data in the patches [0.3, 0.7] x [1/3, 1]: rank-deficient (the poles whose
+    # supports lie there are free), rows in random order
+    surface = _surface(13, 9)
+    rng = np.random.default_rng(13)
+    uv = rng.uniform(0.0, 1.0, (3000, 2))
+    uv = uv[~((uv[:, 0] > 0.3) & (uv[:, 0] < 0.7) & (uv[:, 1] > 1 / 3))]
+    a = surface_basis(surface, uv[:, 0], uv[:, 1])
+    b = np.column_stack([np.sin(2 * uv[:, 0]) * uv[:, 1], uv[:, 0] * uv[:, 1], np.cos(uv[:, 1])])
+    b = b[:, 0] if k is None else b
+    sol = solve_tsvd(a.toarray() if fmt == "dense" else a.asformat(fmt), b, block_rows=block_rows)
+    assert sol.rank < 13 * 9
+    _assert_matches_reference(sol, a.toarray(), b)
+
+
+def test_blocks_skip_zero_rows_but_count_them_in_the_cutoff():
+    rng = np.random.default_rng(14)
+    a = rng.normal(size=(60, 5))
+    a[::3] = 0.0
+    b = rng.normal(size=(60, 2))
+    for A in (a, scipy.sparse.csr_array(a)):
+        sol = solve_tsvd(A, b, block_rows=4)
+        assert sol.cutoff == pytest.approx(sol.singular_values[0] * 60 * FLT_EPSILON)
+        _assert_matches_reference(sol, a, b)
+
+
+def test_repeated_and_unsorted_sparse_entries_are_summed():
+    rng = np.random.default_rng(15)
+    dense = rng.normal(size=(40, 6))
+    rows, cols = np.nonzero(dense)
+    # every entry stored as two halves, the halves of a row in reversed column order
+    order = np.lexsort((-cols, rows))
+    rows, cols, vals = rows[order], cols[order], dense[rows[order], cols[order]]
+    indptr = np.r_[0, np.cumsum(2 * np.bincount(rows, minlength=40))]
+    a = scipy.sparse.csr_array((np.repeat(vals / 2, 2), np.repeat(cols, 2), indptr), shape=(40, 6))
+    assert not a.has_canonical_format
+    b = rng.normal(size=(40, 3))
+    data, indices = a.data.copy(), a.indices.copy()
+    sol = solve_tsvd(a, b, block_rows=7)
+    _assert_matches_reference(sol, dense, b)
+    np.testing.assert_array_equal(a.data, data)            # the caller's matrix is left as it was
+    np.testing.assert_array_equal(a.indices, indices)
+
+
+@pytest.mark.parametrize("block_rows", [0, -3])
+def test_block_rows_must_be_positive(block_rows):
+    with pytest.raises(ValueError, match="block_rows"):
+        solve_tsvd(np.eye(4, 2), np.ones(4), block_rows=block_rows)
