@@ -542,11 +542,14 @@ def _in_pool(jobs: list[Job], workers: int, runner) -> Iterator[dict]:
                 running: dict = {}
                 broken = False
                 while (todo or running) and not broken:
-                    while todo and len(running) < size:
-                        job = todo.pop(0)
-                        running[pool.submit(runner, job)] = job
+                    try:
+                        while todo and len(running) < size:
+                            running[pool.submit(runner, todo[0])] = todo[0]
+                            todo.pop(0)
+                    except BrokenProcessPool:   # a worker died since the last wait: the job stays queued
+                        broken = True
                     done, _ = wait(running, return_when=FIRST_COMPLETED)
-                    broken = any(isinstance(f.exception(), BrokenProcessPool) for f in done)
+                    broken = broken or any(isinstance(f.exception(), BrokenProcessPool) for f in done)
                     if broken:
                         done, _ = wait(running)   # every running job ends with the pool
                     for future in done:
