@@ -46,6 +46,9 @@ QUADRATIC_RCOND = 1e-3
 #: the neighbourhood (relative rms), not at all where they leave more than ``UNTRUSTED``; in between their
 #: weight falls linearly in the logarithm (see :func:`_local_fits`).
 TRUSTED, UNTRUSTED = 0.01, 0.1
+#: k-d trees split at the sliding midpoint and keep their nodes' boxes as split: with a million foot points
+#: they build in a third of the time of the default (median splits, shrunk boxes), and queries are as fast.
+_TREE = {"balanced_tree": False, "compact_nodes": False}
 
 
 def _monomials(offsets: np.ndarray, quadratic: bool) -> np.ndarray:
@@ -134,7 +137,7 @@ class FieldEstimator:
         self._disp = displacements
         self._k = min(neighbours, len(points))
         self._quadratic = self._k >= _QUADRATIC_MIN
-        self._tree = cKDTree(points)
+        self._tree = cKDTree(points, **_TREE)
         # Thinned copies for wide neighbourhoods: level L holds the first n / 2**L foot points of a fixed random
         # order, so each level is a random half of the one before.
         order = np.random.default_rng(0).permutation(len(points))
@@ -144,28 +147,36 @@ class FieldEstimator:
         size = len(points) // 2
         while size >= MAX_NEIGHBOURS:
             keep = np.sort(order[:size])
-            self._levels.append((keep, cKDTree(points[keep])))
+            self._levels.append((keep, cKDTree(points[keep], **_TREE)))
             size //= 2
 
     def _wide(self, x: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Neighbourhoods ``(m, MAX_NEIGHBOURS)`` (indices, valid mask) of ``x (m, 3)``: the foot points within
         ``radius (m,)``, taken from the densest level that holds at most ``MAX_NEIGHBOURS`` of them (from the
-        sparsest level, the first ``MAX_NEIGHBOURS`` of the random order)."""
+        sparsest level, the first ``MAX_NEIGHBOURS`` of the random order).
+
+        The levels are nested, so a ball holds no fewer foot points on a denser level: the levels are searched
+        from the sparsest one on, and a point stops at the first level whose ball holds too many.  Counting
+        costs about the number of points counted, so a wide ball (a point far out, where the densest level's
+        ball may hold most foot points) costs ``O(MAX_NEIGHBOURS)`` per level rather than ``O(n)``."""
         idx = np.zeros((len(x), MAX_NEIGHBOURS), int)
         valid = np.zeros((len(x), MAX_NEIGHBOURS), bool)
+        chosen = np.full(len(x), len(self._levels) - 1)
         pending = np.arange(len(x))
-        for level, (keep, tree) in enumerate(self._levels):
-            counts = tree.query_ball_point(x[pending], radius[pending], return_length=True)
-            fits = (counts <= MAX_NEIGHBOURS) | (level == len(self._levels) - 1)
-            rows = pending[fits]
+        for level in range(len(self._levels) - 1, -1, -1):
+            if not len(pending):
+                break
+            counts = self._levels[level][1].query_ball_point(x[pending], radius[pending], return_length=True)
+            pending = pending[counts <= MAX_NEIGHBOURS]
+            chosen[pending] = level
+        for level in np.unique(chosen):
+            keep, tree = self._levels[level]
+            rows = np.flatnonzero(chosen == level)
             for row, ball in zip(rows, tree.query_ball_point(x[rows], radius[rows])):
                 ball = keep[np.asarray(ball, int)]
                 ball = ball[np.argsort(self._rank[ball])[:MAX_NEIGHBOURS]]
                 idx[row, :len(ball)] = ball
                 valid[row, :len(ball)] = True
-            pending = pending[~fits]
-            if not len(pending):
-                break
         return idx, valid
 
     def __call__(self, x: np.ndarray, chunk: int = 4096) -> np.ndarray:

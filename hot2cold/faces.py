@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.sparse import diags_array
 
 from .artificial import FieldEstimator
 from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
@@ -232,7 +231,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     free = ~fixed.ravel()
     rank, condition = 0, float("nan")
     if free.any():
-        basis = diags_array(weight) @ surface_basis(surface, uv[:, 0], uv[:, 1])
+        basis = surface_basis(surface, uv[:, 0], uv[:, 1])
+        basis.data *= np.repeat(weight, np.diff(basis.indptr))                      # rows weighted in place
         flat = delta.reshape(-1, 3)
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
         sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon)                  # eq. (19)-(20)
