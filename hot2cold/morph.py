@@ -8,10 +8,12 @@ from __future__ import annotations
 import logging
 import os
 import time
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass, replace
 from typing import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .artificial import FieldEstimator
 from .classify import EDGE, Classification, classify_nodes
@@ -95,6 +97,14 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     MorphError : the cold part is not a valid closed solid.
     """
     settings = settings or Settings()
+    limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
+    with limit:
+        return _morph(hot, field, settings, units, field_name, invert, progress)
+
+
+def _morph(hot, field, settings: Settings, units: str, field_name: str | None, invert: bool,
+           progress: Progress | None) -> MorphResult:
+    """:func:`morph` within its BLAS thread limit."""
     timings: dict[str, float] = {}
     clock = time.perf_counter()
 
@@ -195,7 +205,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     lap("sew")
     report_progress("sew")
 
-    errors = node_errors(part, cls, field, cold_vertices, Projector(part.kernel.faces, part.kernel.edges))
+    errors = node_errors(part, cls, field, cold_vertices, Projector(part.kernel.faces, part.kernel.edges),
+                         [f.surface for f in face_morphs])
     lap("report")
     report = build_report(part, cls, field, face_morphs, edge_morphs, errors, gaps, hot_checks, cold_checks,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,

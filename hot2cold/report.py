@@ -16,6 +16,7 @@ from .classify import EDGE, FACE, IGNORED, VERTEX, Classification
 from .edges import EdgeMorph
 from .faces import FaceMorph
 from .field import DisplacementField
+from .footpoint import project_to_surface
 from .kernel.check import SolidCheck
 from .kernel.project import Projector
 from .model import Part
@@ -200,19 +201,27 @@ def _stats(d: np.ndarray) -> tuple[float, float]:
 
 
 def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,
-                projector: Projector) -> np.ndarray:
+                projector: Projector, cold_surfaces: list | None = None) -> np.ndarray:
     """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry (eq. 21).
 
-    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.
+    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.  With the cold
+    surfaces ``cold_surfaces`` (one BSplineSurface per face) the face nodes' foot points are found by
+    Newton's method from their hot parameters (:mod:`hot2cold.footpoint`) and the kernel is asked only
+    where that does not settle.
     """
     errors = np.full(len(cls.role), np.nan)
     target = cls.foot + field.displacements
-    for role, count, project in ((FACE, len(part.faces), projector.to_face),
-                                 (EDGE, len(part.edges), projector.to_edge)):
-        for k in range(count):
-            nodes = cls.nodes_of(role, k)
-            if len(nodes):
-                errors[nodes] = project(k, target[nodes])[1]
+    for k, nodes in cls.groups(FACE):
+        if cold_surfaces is None:
+            errors[nodes] = projector.to_face(k, target[nodes])[1]
+            continue
+        fp = project_to_surface(cold_surfaces[k], target[nodes], cls.uv[nodes], projector.face_box(k))
+        errors[nodes] = fp.distance
+        open_ = nodes[~fp.settled]
+        if len(open_):
+            errors[open_] = projector.to_face(k, target[open_])[1]
+    for k, nodes in cls.groups(EDGE):
+        errors[nodes] = projector.to_edge(k, target[nodes])[1]
     at_vertex = np.flatnonzero(cls.role == VERTEX)
     errors[at_vertex] = np.linalg.norm(target[at_vertex] - cold_vertices[cls.owner[at_vertex]], axis=1)
     return errors

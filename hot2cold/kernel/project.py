@@ -1,24 +1,61 @@
 """Foot points: projection of points onto faces and edges with the kernel (eq. 4, 21, 27).
 
 ``GeomAPI_ProjectPointOnSurf`` and ``GeomAPI_ProjectPointOnCurve`` are initialised once per face or edge
-(the surface's sample tree is built once) and then asked point by point.  The tree algorithm
-(``Extrema_ExtAlgo_Tree``) finds the same foot points as the default gradient one at a quarter of the time
-(measured on the twisted blade: 116 us against 510 us a point, distances equal to 1e-15 mm).  ``BRepTopAdaptor_FClass2d``
-tells whether a foot point lies in a face's trimmed domain.
+and then asked point by point.  They are the reference the vectorised foot points of
+:mod:`hot2cold.footpoint` are checked against, and they settle the nodes that Newton's method leaves open.
+The default (gradient) algorithm is used: the tree one (``Extrema_ExtAlgo_Tree``) is twice as fast but
+missed the foot point of 2 in 3000 points lying on Rotor 37's leading-edge face (0.06 mm off).
+
+Whether a parameter pair lies in a face's trimmed domain is read off a raster of the domain
+(:class:`hot2cold.domain.DomainRaster`) built from the face's pcurves; ``BRepTopAdaptor_FClass2d`` decides
+the points in the raster's cells next to the boundary, so the answer is the kernel's own.
 """
 from __future__ import annotations
 
 import numpy as np
 from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve2d
 from OCP.BRepTools import BRepTools
 from OCP.BRepTopAdaptor import BRepTopAdaptor_FClass2d
-from OCP.Extrema import Extrema_ExtAlgo_Tree
+from OCP.Extrema import Extrema_ExtAlgo_Grad
 from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve, GeomAPI_ProjectPointOnSurf
 from OCP.gp import gp_Pnt, gp_Pnt2d
-from OCP.TopAbs import TopAbs_IN, TopAbs_ON
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON
+from OCP.TopExp import TopExp_Explorer
+from OCP.TopoDS import TopoDS
+
+from ..domain import UNSURE, DomainRaster
+from ..domain import INSIDE as _RASTER_INSIDE
 
 #: Position states of :meth:`Projector.classify`.
 INSIDE, ON_BOUNDARY, OUTSIDE = 0, 1, 2
+#: Fewest and most cells along each side of a face's domain raster.
+RASTER_CELLS = (256, 2048)
+#: A face's raster is built when it is first asked about this many points at once (building it costs about
+#: as much as classifying them one by one).
+RASTER_WORTH = 1_000
+
+
+def _pcurve_polylines(face, box: np.ndarray, cells: int) -> list[np.ndarray]:
+    """Every edge use's pcurve on ``face`` as a polyline ``(m, 2)`` whose segments are at most a raster cell
+    long (``cells`` cells across ``box``)."""
+    cell = np.array([(box[1] - box[0]) / cells, (box[3] - box[2]) / cells])
+    out = []
+    explorer = TopExp_Explorer(face, TopAbs_EDGE)
+    while explorer.More():
+        curve = BRepAdaptor_Curve2d(TopoDS.Edge_s(explorer.Current()), face)
+        first, last = curve.FirstParameter(), curve.LastParameter()
+        n = 65
+        while True:
+            t = np.linspace(first, last, n)
+            pts = np.array([(q.X(), q.Y()) for q in map(curve.Value, t)])
+            longest = float(np.max(np.abs(np.diff(pts, axis=0)) / cell)) if n > 1 else 0.0
+            if longest <= 1.0 or n > 200_000:
+                break
+            n = int(n * min(8.0, longest + 1.0)) + 1
+        out.append(pts)
+        explorer.Next()
+    return out
 
 
 class Projector:
@@ -33,6 +70,7 @@ class Projector:
         self._tol = boundary_tolerance
         self._surf: dict[int, GeomAPI_ProjectPointOnSurf] = {}
         self._class: dict[int, BRepTopAdaptor_FClass2d] = {}
+        self._raster: dict[int, DomainRaster] = {}
         self._curve: dict[int, tuple] = {}
 
     def _surface_projector(self, k: int) -> GeomAPI_ProjectPointOnSurf:
@@ -43,7 +81,7 @@ class Projector:
             u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
             su0, su1, sv0, sv1 = surface.Bounds()       # a trimmed face's box may overshoot its surface
             proj = GeomAPI_ProjectPointOnSurf()
-            proj.Init(surface, max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1), Extrema_ExtAlgo_Tree)
+            proj.Init(surface, max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1), Extrema_ExtAlgo_Grad)
             self._surf[k] = proj
         return proj
 
@@ -63,8 +101,42 @@ class Projector:
                 dist[i] = proj.LowerDistance()
         return uv, dist
 
+    def face_box(self, k: int) -> np.ndarray:
+        """The parameter box ``(u0, u1, v0, v1)`` :meth:`to_face` searches on face ``k``."""
+        face = self._faces[k]
+        u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+        su0, su1, sv0, sv1 = BRep_Tool.Surface_s(face).Bounds()
+        return np.array([max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1)])
+
+    def _domain(self, k: int, points: int) -> DomainRaster:
+        """Face ``k``'s raster, built on first use with more cells the more ``points`` it is first asked
+        about (the share of points left to the kernel falls as the cells shrink)."""
+        raster = self._raster.get(k)
+        if raster is None:
+            face = self._faces[k]
+            box = np.array(BRepTools.UVBounds_s(face))
+            cells = int(np.clip(2 ** np.ceil(np.log2(2.0 * np.sqrt(points))), *RASTER_CELLS))
+            raster = DomainRaster.build(_pcurve_polylines(face, box, cells), box, cells)
+            self._raster[k] = raster
+        return raster
+
     def classify(self, k: int, uv: np.ndarray) -> np.ndarray:
-        """State of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: INSIDE, ON_BOUNDARY or OUTSIDE."""
+        """State of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: INSIDE, ON_BOUNDARY or OUTSIDE.
+
+        The raster decides points away from the boundary; ``BRepTopAdaptor_FClass2d`` the rest.
+        """
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if k not in self._raster and len(uv) < RASTER_WORTH:
+            return self.classify_exactly(k, uv)
+        raster = self._domain(k, len(uv)).classify(uv)
+        state = np.where(raster == _RASTER_INSIDE, INSIDE, OUTSIDE)
+        unsure = np.flatnonzero(raster == UNSURE)
+        if len(unsure):
+            state[unsure] = self.classify_exactly(k, uv[unsure])
+        return state
+
+    def classify_exactly(self, k: int, uv: np.ndarray) -> np.ndarray:
+        """:meth:`classify` by ``BRepTopAdaptor_FClass2d`` alone, one point at a time (the reference)."""
         cls = self._class.get(k)
         if cls is None:
             cls = BRepTopAdaptor_FClass2d(self._faces[k], self._tol)

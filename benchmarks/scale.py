@@ -1,0 +1,218 @@
+"""Speed and scale on Rotor 37: every phase timed at 10 k, 100 k and 1 M surface nodes, against the direct
+approach.
+
+Run from the repository::
+
+    python benchmarks/scale.py                      # 10 000, 100 000 and 1 000 000 nodes
+    python benchmarks/scale.py 100000 --direct-max 100000
+
+For each size the bundled CalculiX field of the Rotor 37 blade (44 478 surface nodes) is resampled onto an
+FE-like surface node set of that size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`, displacements by
+the local fits of :class:`hot2cold.artificial.FieldEstimator`), saved as ``.npz`` under ``--cache`` (default
+``benchmarks/.cache``, made once).  Then, in a fresh process per size so that its peak memory is its own:
+
+* the morph, read from the ``.npz`` (``hot2cold.morph``), with the time of each phase: load (STEP and
+  field), classify (classification and foot points), fit (edges, faces, G1), rebuild and sew, report, and
+  write (the cold STEP); and the process's peak resident memory;
+* the direct approach, for sizes up to ``--direct-max`` (default 100 000; 1 M takes about 15 minutes):
+  every node projected with ``GeomAPI_ProjectPointOnSurf`` onto every face (initialised once per face, the
+  kernel's default algorithm), its foot point classified with ``BRepTopAdaptor_FClass2d``, the nearest one
+  inside within the node distance kept.  Its time against the classify phase is the ratio printed, and its
+  result is compared node by node with the classification's: the same face for every face node, the same
+  distance to 1e-9 mm and the same parameters to 1e-9 of the face's box; nodes that the classification
+  gives to an edge or vertex must have their direct foot point on one of that edge's or vertex's faces.
+
+The targets of issue 6 are printed against what was reached: at 100 k nodes classify >= 20x faster than the
+direct approach with identical results, 100 k nodes end to end <= 10 s, 1 M <= 60 s with peak memory <= 4 GB,
+and time per node not growing with the size.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+STEP = ROOT / "sample_parts" / "rotor37_blade.step"
+FIELD = ROOT / "sample_parts" / "rotor37_blade_field.npz"
+#: FE-like node spacing (mm) that gives about 36 000 nodes on the Rotor 37 blade; nodes grow as 1/spacing^2.
+REFERENCE = (0.5, 36_129)
+
+
+def resampled(n: int, cache: Path) -> Path:
+    """The Rotor 37 field resampled onto about ``n`` surface nodes, as an ``.npz`` in ``cache``."""
+    path = cache / f"rotor37_{n}.npz"
+    if path.exists():
+        return path
+    from hot2cold.artificial import FieldEstimator
+    from hot2cold.kernel.sampling import fe_surface_nodes
+    from hot2cold.kernel.step import read_step
+
+    cache.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    spacing = REFERENCE[0] * np.sqrt(REFERENCE[1] / n)
+    points, _ = fe_surface_nodes(read_step(STEP), spacing)
+    data = np.load(FIELD)
+    displacements = FieldEstimator(data["points"], data["displacements"])(points)
+    np.savez(path, points=points, displacements=displacements)
+    print(f"  resampled {len(points)} nodes (spacing {spacing:.3f} mm) in {time.perf_counter() - start:.0f} s",
+          flush=True)
+    return path
+
+
+def peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def direct(part, points: np.ndarray, node_distance: float):
+    """The direct approach: ``(owner (n,), distance (n,), uv (n, 2))`` of the nearest inside foot point."""
+    from hot2cold.kernel.project import OUTSIDE, Projector
+
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    best = np.full(len(points), np.inf)
+    owner = np.full(len(points), -1)
+    uv = np.full((len(points), 2), np.nan)
+    for face in part.faces:
+        f_uv, f_dist = projector.to_face(face.index, points)
+        inside = projector.classify_exactly(face.index, f_uv) != OUTSIDE
+        better = inside & (f_dist <= node_distance) & (f_dist < best)
+        best[better], owner[better], uv[better] = f_dist[better], face.index, f_uv[better]
+    return owner, best, uv
+
+
+def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict:
+    """Node-by-node comparison of the classification with the direct approach."""
+    from hot2cold.classify import EDGE, FACE, VERTEX
+
+    part, cls = result.part, result.classification
+    face = cls.role == FACE
+    size = np.array([f.uv_box[[1, 3]] - f.uv_box[[0, 2]] for f in part.faces])
+    same_face = cls.owner[face] == owner[face]
+    both = np.flatnonzero(face)[same_face]
+    faces_of_edge = [set(e.faces) for e in part.edges]
+    faces_of_vertex = [set() for _ in range(len(part.vertices))]
+    for e in part.edges:
+        for v in e.vertices:
+            faces_of_vertex[v] |= set(e.faces)
+    boundary_ok = all(owner[i] in (faces_of_edge if cls.role[i] == EDGE else faces_of_vertex)[cls.owner[i]]
+                      for i in np.flatnonzero((cls.role == EDGE) | (cls.role == VERTEX)))
+    return {
+        "face_nodes": int(face.sum()),
+        "other_face": int((~same_face).sum()),
+        "distance_max_diff_mm": float(np.max(np.abs(cls.distance[both] - best[both]), initial=0.0)),
+        "uv_max_rel_diff": float(np.max(np.abs(cls.uv[both] - uv[both]) / size[cls.owner[both]], initial=0.0)),
+        "boundary_nodes_on_a_direct_face": bool(boundary_ok),
+        "ignored_here": int((~cls.used).sum()),
+        "ignored_direct": int((owner < 0).sum()),
+    }
+
+
+def one(n: int, field: Path, with_direct: bool) -> dict:
+    """Run one size in this process; returns its figures."""
+    from hot2cold.morph import morph
+    from hot2cold.settings import Settings
+
+    settings = Settings()
+    start = time.perf_counter()
+    result = morph(STEP, field, settings)
+    total = time.perf_counter() - start
+    with tempfile.TemporaryDirectory() as tmp:
+        clock = time.perf_counter()
+        result.write_step(Path(tmp) / "cold.step")
+        write = time.perf_counter() - clock
+    t = result.report.timings
+    out = {
+        "nodes": len(result.field.points),
+        "load": t["load"], "classify": t["classify"],
+        "fit": t["edges"] + t["faces"] + t.get("g1", 0.0) + t.get("refine", 0.0),
+        "rebuild_sew": t["rebuild"] + t["sew"], "report": t["report"], "write": write,
+        "total": total + write, "peak_mb": peak_mb(),
+        "delta_max": result.report.delta_max, "valid": result.report.valid,
+    }
+    if with_direct:
+        node_distance, _ = settings.lengths(result.part.diagonal)
+        clock = time.perf_counter()
+        owner, best, uv = direct(result.part, result.field.points, node_distance)
+        out["direct"] = time.perf_counter() - clock
+        out["compare"] = compare(result, owner, best, uv)
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("sizes", nargs="*", type=int, default=[10_000, 100_000, 1_000_000])
+    parser.add_argument("--direct-max", type=int, default=100_000,
+                        help="run the direct approach for sizes up to this (default 100000)")
+    parser.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache")
+    parser.add_argument("--one", type=int, help=argparse.SUPPRESS)        # child process: one size
+    parser.add_argument("--field", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--direct", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.one is not None:
+        print(json.dumps(one(args.one, args.field, args.direct)))
+        return 0
+
+    rows = []
+    for n in args.sizes:
+        print(f"{n} nodes:", flush=True)
+        field = resampled(n, args.cache)
+        child = subprocess.run([sys.executable, __file__, "--one", str(n), "--field", str(field)]
+                               + (["--direct"] if n <= args.direct_max else []),
+                               capture_output=True, text=True, check=False)
+        if child.returncode != 0:
+            print(child.stderr[-3000:])
+            return 1
+        row = json.loads(child.stdout.strip().splitlines()[-1])
+        rows.append(row)
+        print("  " + json.dumps(row), flush=True)
+
+    print()
+    head = ("nodes", "load", "classify", "fit", "rebuild+sew", "report", "write", "total", "peak MB", "us/node",
+            "direct", "ratio")
+    print(" ".join(f"{h:>11}" for h in head))
+    for r in rows:
+        ratio = r["direct"] / r["classify"] if "direct" in r else float("nan")
+        cells = (r["nodes"], r["load"], r["classify"], r["fit"], r["rebuild_sew"], r["report"], r["write"],
+                 r["total"], r["peak_mb"], 1e6 * r["total"] / r["nodes"], r.get("direct", float("nan")), ratio)
+        print(" ".join(f"{c:>11d}" if isinstance(c, int) else f"{c:>11.2f}" for c in cells))
+    print()
+    for r in rows:
+        if "compare" in r:
+            print(f"{r['nodes']} nodes, against the direct approach: {json.dumps(r['compare'])}")
+    print()
+    by_size = {r["nodes"]: r for r in rows}
+
+    def nearest(n):
+        return by_size[min(by_size, key=lambda k: abs(k - n))] if by_size else None
+
+    r100, r1m = nearest(100_000), nearest(1_000_000)
+    if r100 is not None and "direct" in r100:
+        c = r100["compare"]
+        same = (c["other_face"] == 0 and c["distance_max_diff_mm"] <= 1e-9 and c["uv_max_rel_diff"] <= 1e-9
+                and c["boundary_nodes_on_a_direct_face"])
+        ratio = r100["direct"] / r100["classify"]
+        print(f"target: {r100['nodes']} nodes, classify >= 20x the direct approach: {ratio:.1f}x "
+              f"{'met' if ratio >= 20 else 'MISSED'}; identical results: {'yes' if same else 'NO'}")
+    if r100 is not None:
+        print(f"target: {r100['nodes']} nodes end to end <= 10 s: {r100['total']:.1f} s "
+              f"{'met' if r100['total'] <= 10 else 'MISSED'}")
+    if r1m is not None and r1m["nodes"] > 500_000:
+        print(f"target: {r1m['nodes']} nodes end to end <= 60 s: {r1m['total']:.1f} s "
+              f"{'met' if r1m['total'] <= 60 else 'MISSED'}; peak memory <= 4096 MB: {r1m['peak_mb']:.0f} MB "
+              f"{'met' if r1m['peak_mb'] <= 4096 else 'MISSED'}")
+    if len(rows) > 1:
+        per = [1e6 * r["total"] / r["nodes"] for r in rows]
+        print("time per node (us) by size: " + ", ".join(f"{r['nodes']}: {p:.1f}" for r, p in zip(rows, per))
+              + f"; {'no worse than linear' if per[-1] <= per[0] * 1.1 else 'WORSE than linear'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,158 @@
+"""Vectorised foot points and the domain raster against the kernel (the kernel as oracle).
+
+* ``footpoint.project_to_surface`` (Newton in numpy) against ``GeomAPI_ProjectPointOnSurf``: same parameters to
+  1e-9 relative, same distances to 1e-9 mm, on the settled nodes; the rest is left to the kernel.
+* ``DomainRaster`` / ``Projector.classify`` against ``BRepTopAdaptor_FClass2d`` point by point.
+* ``classify_nodes`` against the direct approach: every node projected by the kernel onto every face, the
+  nearest inside foot point kept.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from hot2cold.bspline import evaluate_surface, surface_normals
+from hot2cold.classify import FACE, classify_nodes, start_grid
+from hot2cold.domain import INSIDE, OUTSIDE, UNSURE, DomainRaster
+from hot2cold.field import as_field
+from hot2cold.footpoint import project_to_surface
+from hot2cold.kernel.project import OUTSIDE as KERNEL_OUTSIDE
+from hot2cold.kernel.project import Projector
+from hot2cold.load import load_part
+from hot2cold.settings import Settings
+
+SAMPLES = Path(__file__).resolve().parents[1] / "sample_parts"
+
+
+@pytest.fixture(scope="module", params=["rotor37_blade", "filleted_block", "mixer_segment"])
+def part(request):
+    return load_part(SAMPLES / f"{request.param}.step", Settings())
+
+
+def _near_surface_nodes(face, n: int, offset: float, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` nodes ``(n, 3)`` up to ``offset`` mm off ``face``'s surface, and the parameters ``(n, 2)`` they were
+    made at."""
+    u0, u1, v0, v1 = face.uv_box
+    uv = np.column_stack([rng.uniform(u0, u1, n), rng.uniform(v0, v1, n)])
+    normal = surface_normals(face.surface, uv[:, 0], uv[:, 1])
+    normal = np.nan_to_num(normal)
+    points = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) + rng.uniform(-offset, offset, (n, 1)) * normal
+    return points, uv
+
+
+def test_newton_matches_kernel(part):
+    """Nodes within 0.05 mm of each face, started from the nearest point of the face's start grid (as the
+    classification starts them): where Newton settles (most nodes), it finds the kernel's foot point."""
+    rng = np.random.default_rng(7)
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    settled_total = 0
+    for face in part.faces:
+        points, uv = _near_surface_nodes(face, 300, 0.05, rng)
+        box = projector.face_box(face.index)
+        size = box[[1, 3]] - box[[0, 2]]
+        grid, grid_uv = start_grid(face, part.diagonal / 150)
+        start = grid_uv[cKDTree(grid).query(points)[1]]
+        fp = project_to_surface(face.surface, points, start, box)
+        ref_uv, ref_dist = projector.to_face(face.index, points)
+        s = fp.settled & np.isfinite(ref_dist)
+        assert s.mean() > 0.8, f"face {face.index}: only {s.mean():.0%} settled"
+        np.testing.assert_allclose(fp.distance[s], ref_dist[s], rtol=0, atol=1e-9)
+        np.testing.assert_array_less(np.abs(fp.uv[s] - ref_uv[s]) / size, 1e-9)
+        settled_total += int(s.sum())
+    assert settled_total > 0.8 * 300 * len(part.faces)
+
+
+def test_newton_leaves_border_minima_open(part):
+    """Points beyond a face's box (the foot point would be on its border) are not settled: they are for the
+    kernel."""
+    face = max(part.faces, key=lambda f: f.surface.shape[0] * f.surface.shape[1])
+    u0, u1, v0, v1 = face.surface.domain
+    box = np.array([u0 + 0.25 * (u1 - u0), u0 + 0.75 * (u1 - u0), v0 + 0.25 * (v1 - v0), v0 + 0.75 * (v1 - v0)])
+    v = np.linspace(box[2] + 0.1 * (box[3] - box[2]), box[3] - 0.1 * (box[3] - box[2]), 20)
+    outside = np.column_stack([np.full_like(v, u0 + 0.9 * (u1 - u0)), v])     # beyond u1 of the box
+    points = evaluate_surface(face.surface, outside[:, 0], outside[:, 1])
+    fp = project_to_surface(face.surface, points, np.column_stack([np.full_like(v, box[0]), v]), box)
+    assert not fp.settled.any()
+    assert np.all((fp.uv[:, 0] >= box[0]) & (fp.uv[:, 0] <= box[1]))
+
+
+def test_newton_checks_its_input():
+    part = load_part(SAMPLES / "twisted_blade.step", Settings())
+    surface = part.faces[0].surface
+    with pytest.raises(ValueError, match=r"points must be \(n, 3\)"):
+        project_to_surface(surface, np.zeros((4, 2)), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match=r"start must be \(n, 2\)"):
+        project_to_surface(surface, np.zeros((4, 3)), np.zeros((3, 2)))
+
+
+def test_raster_of_a_square_with_a_hole():
+    """Pure numpy: the unit square with a circular hole; decided cells agree with the geometry, and every
+    point within a cell of the boundary is UNSURE."""
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], float)
+    angle = np.linspace(0, 2 * np.pi, 2001)
+    hole = 0.5 + 0.2 * np.column_stack([np.cos(angle), np.sin(angle)])
+    raster = DomainRaster.build([square, hole[::-1]], (0, 1, 0, 1), n=256)
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(-0.05, 1.05, (200_000, 2))
+    state = raster.classify(uv)
+    radius = np.linalg.norm(uv - 0.5, axis=1)
+    truly_inside = np.all((uv > 0) & (uv < 1), axis=1) & (radius > 0.2)
+    decided = state != UNSURE
+    assert np.all((state[decided] == INSIDE) == truly_inside[decided])
+    in_square = np.all((uv >= 0) & (uv <= 1), axis=1)
+    to_square = np.where(in_square, np.min(np.concatenate([uv, 1 - uv], axis=1), axis=1),
+                         np.linalg.norm(np.maximum(np.maximum(-uv, uv - 1), 0), axis=1))
+    to_boundary = np.minimum(np.abs(radius - 0.2), to_square)
+    assert np.all(state[to_boundary < 1.0 / 256] == UNSURE)
+    assert decided.mean() > 0.95
+    assert np.all(raster.classify(np.array([[np.nan, 0.5], [2.0, 0.5]])) == OUTSIDE)
+
+
+def test_classify_matches_fclass2d(part):
+    """``Projector.classify`` (raster + kernel at the boundary) equals ``BRepTopAdaptor_FClass2d`` point by
+    point, on random points of each face's box and points close to its edges."""
+    rng = np.random.default_rng(5)
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    for face in part.faces:
+        u0, u1, v0, v1 = face.uv_box
+        size = np.array([u1 - u0, v1 - v0])
+        uv = [np.column_stack([rng.uniform(u0 - 0.01 * size[0], u1 + 0.01 * size[0], 3000),
+                               rng.uniform(v0 - 0.01 * size[1], v1 + 0.01 * size[1], 3000)])]
+        for use in face.uses:
+            pick = use.uv[rng.integers(0, len(use.uv), 200)]
+            uv += [pick + rng.normal(0, 1e-3, pick.shape) * size, pick + rng.normal(0, 1e-7, pick.shape) * size]
+        uv = np.concatenate(uv)
+        np.testing.assert_array_equal(projector.classify(face.index, uv), projector.classify_exactly(face.index, uv))
+
+
+def test_classification_matches_direct_projection():
+    """Rotor 37 with 2500 nodes (surface nodes of its CalculiX field): the classification equals the direct
+    approach, every node projected by the kernel onto every face and the nearest inside foot point kept."""
+    part = load_part(SAMPLES / "rotor37_blade.step", Settings())
+    data = np.load(SAMPLES / "rotor37_blade_field.npz")
+    pick = np.random.default_rng(11).choice(len(data["points"]), 2500, replace=False)
+    field = as_field((data["points"][pick], data["displacements"][pick]), "mm", None)
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    settings = Settings()
+    cls = classify_nodes(part, field, settings, projector)
+    node_distance, _ = settings.lengths(part.diagonal)
+
+    best = np.full(len(pick), np.inf)
+    owner = np.full(len(pick), -1)
+    uv = np.full((len(pick), 2), np.nan)
+    for face in part.faces:
+        f_uv, f_dist = projector.to_face(face.index, field.points)
+        inside = projector.classify_exactly(face.index, f_uv) != KERNEL_OUTSIDE
+        better = inside & (f_dist <= node_distance) & (f_dist < best)
+        best[better], owner[better], uv[better] = f_dist[better], face.index, f_uv[better]
+    on_face = cls.role == FACE
+    assert on_face.sum() > 2000
+    np.testing.assert_array_equal(cls.owner[on_face], owner[on_face])
+    np.testing.assert_allclose(cls.distance[on_face], best[on_face], rtol=0, atol=1e-9)
+    size = np.array([f.uv_box[[1, 3]] - f.uv_box[[0, 2]] for f in part.faces])[owner[on_face]]
+    assert np.max(np.abs(cls.uv[on_face] - uv[on_face]) / size) < 1e-9
+    # Nodes the classification gave to edges and vertices had a foot point on a face in the direct approach.
+    assert np.all(owner[cls.used] >= 0)
