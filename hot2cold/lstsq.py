@@ -189,13 +189,14 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, block_rows: int | None = N
     ----------
     A : (s, n) dense array or ``scipy.sparse`` matrix/array, the design matrix (s observations, n unknowns).
         A tall ``A`` is read a block of rows at a time (a sparse one densified block by block), so ``s`` may
-        be in the millions: memory is ``O(n^2)`` plus one block.
+        be in the millions: memory is ``O(n^2)`` plus one block and a few integers per row (no copy of a CSR
+        ``A``; other sparse formats are converted to CSR once).
     B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation.
     epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * s * epsilon``; default the
         paper's FLT_EPSILON (single precision, about 1.2e-7).
-    block_rows : int > 0 or None, rows of ``A`` reduced at a time; None sizes the blocks from ``block_bytes``
-        (about ``ROWS_PER_COLUMN`` times the columns a block touches, at least ``MIN_BLOCK_ROWS``).  It
-        changes the rounding, not the result.
+    block_rows : int > 0 or None, rows of ``A`` reduced at a time; None: ``ROWS_PER_COLUMN`` times the
+        columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
+        ``block_bytes``.  It changes the rounding, not the result.
     block_bytes : int, memory budget of one dense block when ``block_rows`` is None.
 
     Returns
