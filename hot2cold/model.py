@@ -85,6 +85,11 @@ class Part:
     solids : list of (int,...) tuples, the faces of each solid.
     diagonal : float, bounding-box diagonal in mm (scale of relative tolerances).
     kernel : opaque handle of the kernel's working copy, used only by :mod:`hot2cold.kernel`.
+    solid_names : tuple of str, the name of each solid as the hot STEP gave it ("" where it gave none);
+        empty when the input carried no names.
+    face_names : tuple of str, the same per face (a face's own label only).
+    styles : opaque record of the hot STEP's names, colours and assembly tree
+        (:class:`hot2cold.kernel.xcaf.Styles`), or None; the cold STEP is written with them.
     """
 
     faces: list[Face]
@@ -93,3 +98,6 @@ class Part:
     solids: list[tuple[int, ...]]
     diagonal: float
     kernel: Any
+    solid_names: tuple[str, ...] = ()
+    face_names: tuple[str, ...] = ()
+    styles: Any = None

@@ -71,7 +71,21 @@ class MorphResult:
     node_errors: np.ndarray
 
     def write_step(self, path: str | os.PathLike) -> None:
-        """Write the cold part to a STEP file (atomically)."""
+        """Write the cold part to a STEP file (atomically).
+
+        When the hot STEP carried names or colours, the cold file is written through XCAF with the hot
+        file's assembly tree and the names and colours of its solids and faces (hot solid i is cold
+        solid i, hot face k cold face k); otherwise as a plain shape.
+        """
+        from .kernel.xcaf import write_step_styles
+
+        styles = self.part.styles
+        if styles is not None and styles.placed:
+            write_step_styles(self.cold.wrapped, styles, path)
+            return
+        if styles is not None:
+            log.warning("the hot STEP's names and colours could not be placed on the cold part; "
+                        "writing %s without them", path)
         write_step(self.cold.wrapped, path)
 
 

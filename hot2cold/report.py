@@ -56,7 +56,8 @@ class EdgeReport:
 
 @dataclass(frozen=True)
 class SolidReport:
-    """One solid: kernel validity, free edges, face count and volumes hot and cold (mm^3)."""
+    """One solid: kernel validity, free edges, face count, volumes hot and cold (mm^3) and its name in the
+    hot STEP ("" where it had none)."""
 
     index: int
     faces: int
@@ -64,6 +65,7 @@ class SolidReport:
     free_edges: int
     volume_hot: float
     volume_cold: float
+    name: str = ""
 
     @property
     def closed(self) -> bool:
@@ -138,7 +140,8 @@ class Report:
                      f"({self.nodes_on_faces} face, {self.nodes_on_edges} edge, {self.nodes_on_vertices} vertex), "
                      f"{self.nodes_ignored} ignored (farther than {self.node_distance:.3g} mm from every face)")
         for s in self.solids:
-            lines.append(f"solid {s.index}: {'valid' if s.valid else 'INVALID'}, "
+            name = f" {s.name!r}" if s.name else ""
+            lines.append(f"solid {s.index}{name}: {'valid' if s.valid else 'INVALID'}, "
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
         for r in self.refinements:
@@ -250,7 +253,9 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
                                 float(gaps[em.index]), em.artificial))
     used = cls.used
     vertex_err = errors[cls.role == VERTEX]
-    solids = [SolidReport(i, c.faces, c.valid, c.free_edges, h.volume, c.volume)
+    names = tuple(getattr(part, "solid_names", ()))
+    solids = [SolidReport(i, c.faces, c.valid, c.free_edges, h.volume, c.volume,
+                          names[i] if i < len(names) else "")
               for i, (h, c) in enumerate(zip(hot_checks, cold_checks))]
     all_err = errors[used]
     return Report(

@@ -1,4 +1,4 @@
-"""Reading and writing STEP files.
+"""Reading and writing STEP files (shapes only; names and colours: :mod:`hot2cold.kernel.xcaf`).
 
 Output is written whole or not at all: to a temporary file in the target folder, then renamed.
 """
@@ -20,16 +20,30 @@ from ..errors import KernelError, StepReadError
 log = logging.getLogger(__name__)
 
 
-def read_step(path: str | os.PathLike) -> TopoDS_Shape:
-    """Read a STEP file into one shape (a compound when the file holds several roots).
-
-    Raises :class:`StepReadError` when the file is missing, unreadable or holds no solid.
-    """
+def check_step_file(path: str | os.PathLike) -> Path:
+    """``path`` as a Path; :class:`StepReadError` when the file is missing or empty."""
     path = Path(path)
     if not path.is_file():
         raise StepReadError(f"STEP file not found: {path}")
     if path.stat().st_size == 0:
         raise StepReadError(f"STEP file is empty: {path}")
+    return path
+
+
+def check_step_shape(shape: TopoDS_Shape, path: Path) -> TopoDS_Shape:
+    """``shape`` as read from ``path``; :class:`StepReadError` when it holds no solid."""
+    if shape.IsNull() or not TopExp_Explorer(shape, TopAbs_SOLID).More():
+        raise StepReadError(f"STEP file {path} holds no solid: hot2cold morphs solids (export the part as a solid)")
+    return shape
+
+
+def read_step(path: str | os.PathLike) -> TopoDS_Shape:
+    """Read a STEP file into one shape (a compound when the file holds several roots).
+
+    Raises :class:`StepReadError` when the file is missing, unreadable or holds no solid.  Names and
+    colours are not read: :func:`hot2cold.kernel.xcaf.read_step_styles` reads them with the same shape.
+    """
+    path = check_step_file(path)
     reader = STEPControl_Reader()
     try:
         status = reader.ReadFile(str(path))
@@ -39,9 +53,7 @@ def read_step(path: str | os.PathLike) -> TopoDS_Shape:
         raise StepReadError(f"cannot read STEP file {path}: not a valid STEP file (reader status {status.name})")
     if reader.TransferRoots() == 0:
         raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
-    shape = reader.OneShape()
-    if shape.IsNull() or not TopExp_Explorer(shape, TopAbs_SOLID).More():
-        raise StepReadError(f"STEP file {path} holds no solid: hot2cold morphs solids (export the part as a solid)")
+    shape = check_step_shape(reader.OneShape(), path)
     log.info("read %s", path)
     return shape
 
