@@ -137,9 +137,12 @@ def one(n: int, field: Path, with_direct: bool) -> dict:
         "delta_max": result.report.delta_max, "valid": result.report.valid,
     }
     if with_direct:
-        node_distance, _ = settings.lengths(result.part.diagonal)
+        from hot2cold.load import load_part
+
+        hot = load_part(STEP, settings)          # the morph's own part holds the cold geometry by now
+        node_distance, _ = settings.lengths(hot.diagonal)
         clock = time.perf_counter()
-        owner, best, uv = direct(result.part, result.field.points, node_distance)
+        owner, best, uv = direct(hot, result.field.points, node_distance)
         out["direct"] = time.perf_counter() - clock
         out["compare"] = compare(result, owner, best, uv)
     return out

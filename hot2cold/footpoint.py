@@ -31,11 +31,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import BSplineSurface, surface_jet
+from .bspline import BSplineSurface, evaluate_surface, surface_jet
 
-#: A Newton step smaller than this fraction of the parameter box settles a node (after it, the error of a
-#: quadratically converging iteration is of the order of the step squared).
-STEP_RTOL = 1e-12
+#: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
+#: as Newton's method converges quadratically the error left is of the order of the step squared (1e-18 of
+#: the box).  The foot point's distance then comes from the last evaluation and its first derivatives
+#: (``|r + S_u du + S_v dv|``, off by the step squared too), so a settled node costs no extra evaluation.
+STEP_RTOL = 1e-9
 #: Newton iterations at the most.
 MAX_ITERATIONS = 25
 #: Nodes evaluated together (bounds the memory of the jet: about 1 kB a node for bicubic patches).
@@ -91,15 +93,17 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
     m = len(p)
     uv = np.clip(start, lo, hi)
     settled = np.zeros(m, bool)
-    s0 = surface_jet(surface, uv[:, 0], uv[:, 1])[0] if m else np.zeros((0, 3))
-    start_distance = np.linalg.norm(s0 - p, axis=1)
+    distance = np.full(m, np.nan)
+    start_distance = np.full(m, np.inf)
     active = np.arange(m)
     scale = hi - lo
-    for _ in range(MAX_ITERATIONS):
+    for iteration in range(MAX_ITERATIONS):
         if not len(active):
             break
         s, su, sv, suu, suv, svv = surface_jet(surface, uv[active, 0], uv[active, 1])
         r = s - p[active]
+        if iteration == 0:
+            start_distance = np.linalg.norm(r, axis=1)
         g = np.column_stack([np.einsum("ij,ij->i", su, r), np.einsum("ij,ij->i", sv, r)])
         e = np.einsum("ij,ij->i", su, su)
         f = np.einsum("ij,ij->i", su, sv)
@@ -124,10 +128,13 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         stuck = np.all(np.abs(new - uv[active]) <= STEP_RTOL * scale, axis=1)   # at the border, pushing out
         tiny = np.all(np.abs(step) <= STEP_RTOL * scale, axis=1)
         uv[active] = new
-        finished = tiny | stuck | bad
-        settled[active[tiny & newton & ~clamped & ~bad]] = True
-        active = active[~finished]
-    s = surface_jet(surface, uv[:, 0], uv[:, 1])[0] if m else np.zeros((0, 3))
-    distance = np.linalg.norm(s - p, axis=1)
+        done = tiny & newton & ~clamped & ~bad
+        distance[active[done]] = np.linalg.norm(r[done] + su[done] * step[done, :1] + sv[done] * step[done, 1:],
+                                                axis=1)
+        settled[active[done]] = True
+        active = active[~(tiny | stuck | bad)]
+    rest = np.flatnonzero(~settled)
+    if len(rest):
+        distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
     settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
     return uv, distance, settled

@@ -109,13 +109,14 @@ class Projector:
         return np.array([max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1)])
 
     def _domain(self, k: int, points: int) -> DomainRaster:
-        """Face ``k``'s raster, built on first use with more cells the more ``points`` it is first asked
-        about (the share of points left to the kernel falls as the cells shrink)."""
+        """Face ``k``'s raster, with more cells the more ``points`` it is asked about at once (the share of
+        points left to the kernel falls as the cells shrink); built again, finer, when a larger request
+        comes."""
+        cells = int(np.clip(2 ** np.ceil(np.log2(2.0 * np.sqrt(points))), *RASTER_CELLS))
         raster = self._raster.get(k)
-        if raster is None:
+        if raster is None or raster.state.shape[0] < cells:
             face = self._faces[k]
             box = np.array(BRepTools.UVBounds_s(face))
-            cells = int(np.clip(2 ** np.ceil(np.log2(2.0 * np.sqrt(points))), *RASTER_CELLS))
             raster = DomainRaster.build(_pcurve_polylines(face, box, cells), box, cells)
             self._raster[k] = raster
         return raster
