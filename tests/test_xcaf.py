@@ -223,3 +223,35 @@ def test_styles_reader_refuses_as_the_plain_reader(tmp_path, make, words):
     with pytest.raises(StepReadError) as plain:
         read_step(path)
     assert str(styled.value) == str(plain.value)
+
+
+def test_nested_assembly_with_a_part_placed_twice(tmp_path, capsys):
+    """A sub-assembly (placed, with a half-transparent box and a cylinder with a coloured face) and one box
+    placed twice from the same part: every solid morphed, the tree, names and colours kept."""
+    box = cq.Workplane().box(10, 20, 30).val()
+    cylinder = cq.Workplane().cylinder(20, 5).val()
+    sub = cq.Assembly(name="sub", loc=cq.Location((0, 50, 0)))
+    sub.add(box, name="inner_box", color=cq.Color(0.2, 0.4, 0.6, 0.5))
+    sub.add(cylinder, name="inner_cyl", loc=cq.Location((30, 0, 0)))
+    sub["inner_cyl"].addSubshape(cylinder.Faces()[0], name="cyl_face", color=cq.Color(*GREEN))
+    top = cq.Assembly(name="top")
+    top.add(sub, name="sub")
+    top.add(box, name="twin_a", loc=cq.Location((-40, 0, 0), (0, 0, 1), 30))
+    top.add(box, name="twin_b", loc=cq.Location((-80, 0, 0)))
+    hot = tmp_path / "nested.step"
+    top.export(str(hot))
+    shape, hot_styles = read_step_styles(hot)
+    assert [s.name for s in hot_styles.solids] == ["inner_box", "inner_cyl", "twin_a", "twin_b"]
+    field = _write_field(tmp_path / "field.csv", fe_surface_nodes(shape, 1.5, seed=6)[0])
+    cold, report = tmp_path / "cold.step", tmp_path / "cold.json"
+    assert main(["morph", str(hot), str(field), "-o", str(cold), "--report", str(report), "-q"]) == 0
+    assert [s["name"] for s in json.loads(report.read_text())["solids"]] == [s.name for s in hot_styles.solids]
+    _, cold_styles = read_step_styles(cold)
+    assert cold_styles.solids == hot_styles.solids and cold_styles.faces == hot_styles.faces
+    assert [_tree(r) for r in cold_styles.roots] == [_tree(r) for r in hot_styles.roots]
+    assert hot_styles.solids[0].colour[3] == 0.5
+    hot_part, back = decompose(shape), decompose(read_step(cold))
+    assert back.solids == hot_part.solids
+    for h, c in zip(hot_part.faces, back.faces):
+        np.testing.assert_allclose(c.surface.poles.reshape(-1, 3), FIELD.exact_map(h.surface.poles.reshape(-1, 3)),
+                                   atol=1e-7)

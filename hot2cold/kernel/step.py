@@ -60,17 +60,28 @@ def read_step(path: str | os.PathLike) -> TopoDS_Shape:
 
 def write_step(shape: TopoDS_Shape, path: str | os.PathLike) -> None:
     """Write ``shape`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+    path = check_output_folder(path)
+    writer = STEPControl_Writer()
+    if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
+        raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
+    write_translated(writer, path)
+
+
+def check_output_folder(path: str | os.PathLike) -> Path:
+    """``path`` as a Path; :class:`KernelError` when its folder does not exist."""
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise KernelError(f"output folder does not exist: {folder}")
-    writer = STEPControl_Writer()
-    if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
-        raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
+    return path
 
+
+def write_translated(writer, path: Path, note: str = "") -> None:
+    """Write what ``writer`` (a ``STEPControl_Writer`` or ``STEPCAFControl_Writer`` holding the translated
+    part) holds to ``path``, atomically."""
     def write(tmp: str) -> None:
         if writer.Write(tmp) != IFSelect_RetDone:
             raise KernelError(f"the kernel could not write STEP file {path}")
 
     write_atomically([(path, write)])
-    log.info("wrote %s", path)
+    log.info("wrote %s%s", path, note)

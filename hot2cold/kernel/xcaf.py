@@ -24,7 +24,6 @@ from __future__ import annotations
 import logging
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.Interface import Interface_Static
@@ -43,9 +42,8 @@ from OCP.XCAFApp import XCAFApp_Application
 from OCP.XCAFDoc import (XCAFDoc_ColorCurv, XCAFDoc_ColorGen, XCAFDoc_ColorSurf, XCAFDoc_ColorTool,
                          XCAFDoc_DocumentTool, XCAFDoc_ShapeTool)
 
-from ..atomic import write_atomically
 from ..errors import KernelError, StepReadError
-from .step import check_step_file, check_step_shape
+from .step import check_output_folder, check_step_file, check_step_shape, write_translated
 from .topology import index_map
 
 log = logging.getLogger(__name__)
@@ -314,8 +312,8 @@ class _Reader:
         prototype = XCAFDoc_ShapeTool.GetShape_s(label)
         path = _find(self.shape, prototype.Moved(placed))
         if path is None:
-            log.warning("a part of the STEP document (%s) is not in the shape read; its names and colours "
-                        "are kept in the report only", style.name or "no name")
+            log.warning("a part of the STEP document (%s) is not in the shape read: the cold STEP will be "
+                        "written without names and colours", style.name or "no name")
             self.lost += 1
             return Node(style, path=None, location=prototype.Location())
         instance = follow(self.shape, path)
@@ -490,10 +488,7 @@ def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLik
     Raises :class:`KernelError` when the kernel cannot build or translate the document, :class:`OutputError`
     when the file cannot be written.
     """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise KernelError(f"output folder does not exist: {folder}")
+    path = check_output_folder(path)
     writer = STEPCAFControl_Writer()              # creating it sets up the statics changed below
     writer.SetNameMode(True)
     writer.SetColorMode(True)
@@ -508,10 +503,4 @@ def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLik
             raise KernelError(f"the kernel could not translate the cold part to STEP for {path}: {exc}") from exc
         if not transferred:
             raise KernelError(f"the kernel could not translate the cold part to STEP for {path}")
-
-        def write(tmp: str) -> None:
-            if writer.Write(tmp) != IFSelect_RetDone:
-                raise KernelError(f"the kernel could not write STEP file {path}")
-
-        write_atomically([(path, write)])
-    log.info("wrote %s with names and colours", path)
+        write_translated(writer, path, " with the hot file's names, colours and assembly tree")
