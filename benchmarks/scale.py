@@ -135,6 +135,7 @@ def one(n: int, field: Path, with_direct: bool) -> dict:
         "rebuild_sew": t["rebuild"] + t["sew"], "report": t["report"], "write": write,
         "total": total + write, "peak_mb": peak_mb(),
         "delta_max": result.report.delta_max, "valid": result.report.valid,
+        "face_rank": [f"{f.rank}/{f.unknowns}" for f in result.faces],
     }
     if with_direct:
         from hot2cold.load import load_part
@@ -186,6 +187,9 @@ def main(argv=None) -> int:
                  r["total"], r["peak_mb"], 1e6 * r["total"] / r["nodes"], r.get("direct", float("nan")), ratio)
         print(" ".join(f"{c:>11d}" if isinstance(c, int) else f"{c:>11.2f}" for c in cells))
     print()
+    for r in rows:
+        print(f"{r['nodes']} nodes: Δmax {r['delta_max']:.3g} mm, valid {r['valid']}, face fits rank/unknowns "
+              f"{' '.join(r['face_rank'])}")
     for r in rows:
         if "compare" in r:
             print(f"{r['nodes']} nodes, against the direct approach: {json.dumps(r['compare'])}")
