@@ -72,13 +72,12 @@ def project_to_surface(surface: BSplineSurface, points: np.ndarray, start: np.nd
         raise ValueError(f"points must be (n, 3), got shape {points.shape}")
     if start.shape != (len(points), 2):
         raise ValueError(f"start must be (n, 2) = ({len(points)}, 2), got shape {start.shape}")
-    u0, u1, v0, v1 = surface.domain if box is None else (float(b) for b in box)
-    du0, dv0 = surface.domain[0], surface.domain[2]
-    u0, u1 = max(u0, du0), min(u1, surface.domain[1])
-    v0, v1 = max(v0, dv0), min(v1, surface.domain[3])
-    if not (u1 > u0 and v1 > v0):
-        raise ValueError(f"empty parameter box ({u0}, {u1}, {v0}, {v1})")
-    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    domain = np.asarray(surface.domain, dtype=float)
+    box = domain if box is None else np.asarray(box, dtype=float)
+    lo = np.maximum(box[[0, 2]], domain[[0, 2]])          # the box within the domain: (u0, v0) and (u1, v1)
+    hi = np.minimum(box[[1, 3]], domain[[1, 3]])
+    if not np.all(hi > lo):
+        raise ValueError(f"empty parameter box {box} within the surface's domain {domain}")
     uv = np.empty((len(points), 2))
     distance = np.empty(len(points))
     settled = np.zeros(len(points), bool)
