@@ -7,8 +7,9 @@
 Every output is checked before the morph starts (its folder exists and is writable, it is neither input
 nor another output) and written whole or not at all.
 
-Exit codes: 0 success; 2 unusable input (file, field, option, output path); 3 kernel failure; 4 the cold
-part is not a valid closed solid (nothing written but the report); 5 written, but --tolerance not met;
+Exit codes: 0 success; 2 unusable input (file, field, option, output path; README "Bad input" lists them);
+3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself (nothing written
+but the report); 5 written, but --tolerance not met;
 6 an output could not be written (none of it is left; the message says what else is written); 70
 internal error; 130 interrupted.
 
@@ -26,10 +27,11 @@ import math
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from . import __version__
-from .errors import Hot2ColdError, InputError, OutputError
+from .errors import Hot2ColdError, InputError, OutputError, StepReadError
 from .field import UNITS
 
 log = logging.getLogger("hot2cold")
@@ -63,6 +65,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     m.add_argument("--edge-distance", type=float, metavar="MM",
                    help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
+    m.add_argument("--extrapolate", action="store_true",
+                   help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
+                   "warning); without it such a field is refused")
     views = m.add_argument_group("viewer exports (written after the cold STEP)")
     views.add_argument("--vtu", type=Path, metavar="NODES.vtu",
                        help="for ParaView: two files, NODES.vtu = the FE nodes at their hot positions with point "
@@ -142,6 +147,16 @@ class _BatchProgress:
         self.stream.flush()
 
 
+def _check_input(path: Path, what: str) -> None:
+    """Refuse an input file before anything is loaded: missing, a folder, or not readable."""
+    if not path.exists():
+        raise InputError(f"{what} not found: {path}; check the path")
+    if path.is_dir():
+        raise InputError(f"{what} {path} is a folder: give the file itself")
+    if not os.access(path, os.R_OK):
+        raise InputError(f"cannot read {what} {path}: permission denied; check its permissions")
+
+
 def _check_output(inputs, output: Path, what: str) -> None:
     """Refuse ``output`` before the long run: it is one of ``inputs`` (a path or paths), or its folder is
     missing or not writable."""
@@ -153,7 +168,7 @@ def _check_output(inputs, output: Path, what: str) -> None:
     if not folder.is_dir():
         raise InputError(f"folder for {what} {output} does not exist: create it first")
     if not os.access(folder, os.W_OK):
-        raise InputError(f"folder for {what} {output} is not writable")
+        raise InputError(f"folder for {what} {output} is not writable: choose another folder or fix its permissions")
     if output.is_dir():
         raise InputError(f"{what} {output} is a folder: give a file name")
 
@@ -221,14 +236,20 @@ def _morph(args) -> int:
     from .batch import settings_for, tolerance_missed, write_cold
     from .morph import morph
 
+    _check_input(args.hot, "STEP file")
+    _check_input(args.field, "field file")
     _check_outputs(args)
     _check_options(args)
     if args.html:
         _html_writer()
-    settings = settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance)
+    settings = replace(settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance),
+                       extrapolate=args.extrapolate)
     progress = None if args.quiet else _Progress(sys.stderr)
-    result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
-                   invert=args.invert, progress=progress)
+    try:
+        result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
+                       invert=args.invert, progress=progress)
+    except StepReadError as exc:
+        raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
         print(result.report.table())
     written = args.written = []         # for the messages of a failure or an interruption from here on
@@ -248,6 +269,21 @@ def _morph(args) -> int:
         print(f"hot2cold: {missed}", file=sys.stderr)
         return 5
     return 0
+
+
+def _no_solid(path: Path, exc: StepReadError) -> StepReadError:
+    """``exc``, or where the STEP file holds shells or faces but no solid, an error that says what it holds."""
+    if "no solid" not in str(exc):     # read_step's words for a file it read that holds no solid
+        return exc
+    from .kernel.check import step_content
+
+    content = step_content(path)
+    if content is None:
+        return exc
+    todo = ("make a solid of it" if content.endswith(", closed") else
+            "close it (sew it, add the missing faces) and make a solid of it")
+    return StepReadError(f"STEP file {path} holds no solid, only {content}: hot2cold morphs closed solids; "
+                         f"{todo} in CAD")
 
 
 def _batch(args) -> int:

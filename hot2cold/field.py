@@ -37,6 +37,12 @@ extra).  ``.dat`` files stay text tables.
 
 Every problem raises :class:`hot2cold.errors.FieldError` with a one-line message that says what is wrong
 and what to do.
+
+Duplicate nodes (:func:`merge_duplicates`, applied by :func:`read_field` and :func:`as_field`): nodes at the
+same position (within ``DUPLICATE_RTOL`` of the field's extent) with the same displacement (within
+``DUPLICATE_DISPLACEMENT_RTOL`` of the largest one) are merged into one, with a log line; with different
+displacements they are an error, since a position takes one displacement (the coincident nodes of two
+meshes that were not merged, a contact that opened).
 """
 from __future__ import annotations
 
@@ -53,7 +59,7 @@ import numpy as np
 from hot2cold.errors import FieldError
 
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
-           "as_field", "match_points"]
+           "as_field", "match_points", "merge_duplicates", "DUPLICATE_RTOL", "DUPLICATE_DISPLACEMENT_RTOL"]
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +71,13 @@ REQUIRED_COLUMNS = ("x", "y", "z", "dx", "dy", "dz")
 
 #: Column names taken as FE node ids (case-insensitive).
 ID_COLUMNS = ("id", "node", "node_id", "nodeid", "nid", "node_number")
+
+#: Nodes closer than this times the diagonal of the field's bounding box are at the same position.
+DUPLICATE_RTOL = 1e-9
+
+#: Nodes at the same position whose displacements differ by at most this times the largest displacement of the
+#: field (or by ``DUPLICATE_RTOL`` times its extent, if more) have the same displacement.
+DUPLICATE_DISPLACEMENT_RTOL = 1e-6
 
 _NPZ_MAGIC = b"PK\x03\x04"
 _QUOTES = "\"'"
@@ -232,15 +245,17 @@ def read_field(path, units: str = "mm", field_name: str | None = None, *, points
         field = field.scaled(factor)
     log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind.partition(":")[0],
              units.strip().lower())
-    return field
+    return merge_duplicates(field)
 
 
 def as_field(field, units: str = "mm", field_name: str | None = None) -> DisplacementField:
     """Turn what a user passed into a :class:`DisplacementField` in millimetres.
 
-    Accepts a :class:`DisplacementField` (returned as it is; it is already in mm, so ``units`` must be
-    ``"mm"``), a path (``str`` or ``os.PathLike``; see :func:`read_field`, which gets ``field_name``), or a
-    pair ``(points, displacements)`` of (N, 3) array-likes in ``units``.
+    Accepts a :class:`DisplacementField` (returned as it is unless it has duplicate nodes, see
+    :func:`merge_duplicates`; it is already in mm, so ``units`` must be ``"mm"``), a path (``str`` or
+    ``os.PathLike``; see :func:`read_field`, which gets ``field_name``), or a pair ``(points,
+    displacements)`` of (N, 3) array-likes in ``units``.  Duplicate nodes are merged or refused
+    (:func:`merge_duplicates`).
     """
     factor = _unit_factor(units)
     if isinstance(field, DisplacementField):
@@ -248,21 +263,86 @@ def as_field(field, units: str = "mm", field_name: str | None = None) -> Displac
             raise FieldError(
                 f"a DisplacementField is already in mm, so units={units!r} cannot apply to it; "
                 f"use field.scaled(...) or pass units='mm'")
-        return field
+        return merge_duplicates(field)
     if isinstance(field, (str, bytes, os.PathLike)):
         return read_field(field, units, field_name)
     if isinstance(field, (tuple, list)) and len(field) == 2:
         points, displacements = field
         result = DisplacementField(points, displacements, source="arrays")
-        return result.scaled(factor) if factor != 1.0 else result
+        return merge_duplicates(result.scaled(factor) if factor != 1.0 else result)
     raise FieldError(
         f"cannot make a displacement field from {type(field).__name__}: pass a DisplacementField, "
         f"a file path, or a (points, displacements) pair of (N, 3) arrays")
 
 
+def merge_duplicates(field: DisplacementField) -> DisplacementField:
+    """``field`` with its duplicate nodes merged: nodes within ``DUPLICATE_RTOL`` times the field's extent of
+    each other are one position; if their displacements agree (see ``DUPLICATE_DISPLACEMENT_RTOL``) they
+    become one node (their mean; the first one's id), logged.  ``field`` itself when it has no duplicates.
+
+    Raises :class:`FieldError` when nodes at one position have different displacements, naming how many
+    positions and the first one.
+    """
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = len(field)
+    if n < 2:
+        return field
+    p, d = field.points, field.displacements
+    extent = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+    tol = DUPLICATE_RTOL * extent
+    if tol > 0:
+        pairs = cKDTree(p, balanced_tree=False, compact_nodes=False).query_pairs(tol, output_type="ndarray")
+    else:  # every node at one point
+        pairs = np.column_stack([np.zeros(n - 1, np.int64), np.arange(1, n)])
+    if not len(pairs):
+        return field
+    # Groups of nodes at one position (a chain of close pairs is one group).
+    graph = coo_array((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    order = np.argsort(label, kind="stable")
+    first = np.ones(n, bool)
+    first[1:] = label[order][1:] != label[order][:-1]
+    starts = np.flatnonzero(first)
+    sizes = np.diff(np.append(starts, n))
+    group = np.repeat(np.arange(len(starts)), sizes)           # group of each node in ``order``
+    mean = np.zeros((len(starts), 3))
+    np.add.at(mean, group, d[order])
+    mean /= sizes[:, None]
+    spread = np.linalg.norm(d[order] - mean[group], axis=1)
+    worst = np.zeros(len(starts))
+    np.maximum.at(worst, group, spread)
+    dmax = float(np.linalg.norm(d, axis=1).max())
+    agree = max(DUPLICATE_DISPLACEMENT_RTOL * dmax, tol, 1e-12)
+    where = f" {field.source}" if field.source else ""
+    bad = np.flatnonzero((sizes > 1) & (worst > agree))
+    if len(bad):
+        g = int(bad[0])
+        members = np.sort(order[starts[g]:starts[g] + sizes[g]])
+        i, j = int(members[0]), int(members[np.argmax(np.linalg.norm(d[members] - d[members[0]], axis=1))])
+        ids = "" if field.node_ids is None else f", node ids {int(field.node_ids[i])} and {int(field.node_ids[j])}"
+        raise FieldError(
+            f"field{where} has {_n(len(bad), 'position')} with duplicate nodes of different displacements, "
+            f"e.g. ({_fmt(p[i])}) mm: rows {i} and {j} (from 0{ids}) move by ({_fmt(d[i])}) and ({_fmt(d[j])}) mm; "
+            f"a position takes one displacement: merge the coincident nodes in the FE model or drop one of them")
+    keep = order[starts]                                         # the first node (in ``order``) of each group
+    keep_sorted = np.argsort(keep, kind="stable")
+    merged = n - len(starts)
+    log.info("field%s: %s at the same position as another with the same displacement merged", where,
+             _n(merged, "duplicate node"))
+    ids = None if field.node_ids is None else field.node_ids[keep[keep_sorted]]
+    return DisplacementField(p[keep[keep_sorted]], mean[keep_sorted], ids, source=field.source)
+
+
 # --------------------------------------------------------------------------------------------------------
 # Helpers
 # --------------------------------------------------------------------------------------------------------
+def _fmt(v) -> str:
+    return ", ".join(f"{float(x):.6g}" for x in v)
+
+
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 

@@ -57,6 +57,10 @@ class Settings:
         threads, and on a busy machine the threads spin against each other: Rotor 37 with 36 000 nodes on
         this 2-core machine with a second job running, edges 22 s and faces 10 s with OpenBLAS's default
         threads, 0.5 s and 2.5 s with one.  None leaves the library as it is.
+    extrapolate : bool
+        A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
+        unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
+        foot points of the other faces, with a warning.
     """
 
     node_distance: float | None = None
@@ -71,6 +75,7 @@ class Settings:
     max_refinements: int = 4
     g1_angle: float | None = 1.0
     blas_threads: int | None = 1
+    extrapolate: bool = False
 
     def __post_init__(self):
         for name in ("node_distance", "edge_distance", "tolerance"):

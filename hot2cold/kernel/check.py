@@ -1,20 +1,29 @@
-"""Checks of a solid: kernel validity, free edges, volume."""
+"""Checks of a solid: kernel validity, free edges, volume, self-intersection; what a STEP file holds."""
 from __future__ import annotations
 
+import logging
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from OCP.BOPAlgo import BOPAlgo_ArgumentAnalyzer, BOPAlgo_CheckStatus
 from OCP.BRep import BRep_Tool
 from OCP.BRepCheck import BRepCheck_Analyzer
+from OCP.BRepExtrema import BRepExtrema_DistShapeShape
 from OCP.BRepGProp import BRepGProp
 from OCP.GProp import GProp_GProps
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SOLID
+from OCP.IFSelect import IFSelect_RetDone
+from OCP.STEPControl import STEPControl_Reader
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SHELL, TopAbs_SOLID, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopTools import TopTools_IndexedMapOfShape
 from OCP.TopoDS import TopoDS
 
-from .topology import shape_map
+from ..errors import KernelError
+from .topology import index_map, shape_map
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -56,6 +65,16 @@ def volume(shape) -> float:
     return float(props.Mass())
 
 
+def face_areas(faces) -> np.ndarray:
+    """Areas ``(n,)`` in mm^2 of the faces ``faces`` (trimmed)."""
+    areas = np.empty(len(faces))
+    for k, face in enumerate(faces):
+        props = GProp_GProps()
+        BRepGProp.SurfaceProperties_s(face, props)
+        areas[k] = props.Mass()
+    return areas
+
+
 def check_solids(shape) -> list[SolidCheck]:
     """One :class:`SolidCheck` per solid of ``shape``."""
     out = []
@@ -63,3 +82,96 @@ def check_solids(shape) -> list[SolidCheck]:
         out.append(SolidCheck(valid=bool(BRepCheck_Analyzer(solid).IsValid()), free_edges=free_edges(solid),
                               faces=len(shape_map(solid, TopAbs_FACE)), volume=volume(solid)))
     return out
+
+
+@dataclass(frozen=True)
+class Intersection:
+    """Two sub-shapes of a shape that intersect: ``kinds`` ("face", "edge" or "vertex") and ``indices`` in the
+    project's numbering of the shape (:func:`.topology.shape_map`, 0-based); ``at``, a point where they meet
+    (None for two that share a vertex)."""
+
+    kinds: tuple[str, str]
+    indices: tuple[int, int]
+    at: tuple[float, float, float] | None = None
+
+    def __str__(self) -> str:
+        """E.g. "faces 2 and 5 intersect near (1, 2, 3) mm"."""
+        (a, b), (i, j) = self.kinds, self.indices
+        where = "" if self.at is None else f" near ({', '.join(f'{x:.4g}' for x in self.at)}) mm"
+        return (f"{a} {i} and {b} {j}" if a != b else f"{a}s {i} and {j}") + " intersect" + where
+
+
+_KINDS = {TopAbs_FACE: "face", TopAbs_EDGE: "edge", TopAbs_VERTEX: "vertex"}
+
+
+def self_intersections(shape, touch: float) -> list[Intersection]:
+    """Pairs of faces, edges or vertices of ``shape`` that intersect where they should not
+    (``BOPAlgo_ArgumentAnalyzer``'s self-interference test).
+
+    The analyzer counts sub-shapes whose tolerance zones overlap; a morph widens edge tolerances to the true
+    edge-face gaps (:mod:`.sew`), and two such edges near each other are no intersection.  So a pair that
+    shares no vertex counts only if it is less than ``touch`` (mm) apart (``BRepExtrema_DistShapeShape``);
+    a pair that shares a vertex always counts (adjacent faces crossing beyond their common edge).
+    """
+    analyzer = BOPAlgo_ArgumentAnalyzer()
+    analyzer.SetShape1(shape)
+    analyzer.SelfInterMode = True
+    try:
+        analyzer.Perform()
+    except Exception as exc:  # Standard_Failure
+        raise KernelError(f"the self-intersection check of the cold part failed: {exc}") from exc
+    if not analyzer.HasFaulty():
+        return []
+    maps = {kind: index_map(shape, kind) for kind in _KINDS}
+    found: list[Intersection] = []
+    for result in analyzer.GetCheckResult():
+        if result.GetCheckStatus() != BOPAlgo_CheckStatus.BOPAlgo_SelfIntersect:
+            continue
+        subs = list(result.GetFaultyShapes1())
+        if len(subs) != 2 or any(sub.ShapeType() not in _KINDS for sub in subs):
+            continue
+        a, b = subs
+        at = None
+        if not _share_vertex(a, b):
+            distance = BRepExtrema_DistShapeShape(a, b)
+            if not distance.IsDone() or distance.Value() > touch:
+                log.debug("tolerance zones of %s and %s overlap, %.3g mm apart: not an intersection",
+                          _KINDS[a.ShapeType()], _KINDS[b.ShapeType()], distance.Value())
+                continue
+            point = distance.PointOnShape1(1)
+            at = (point.X(), point.Y(), point.Z())
+        found.append(Intersection((_KINDS[a.ShapeType()], _KINDS[b.ShapeType()]),
+                                  (maps[a.ShapeType()].FindIndex(a) - 1, maps[b.ShapeType()].FindIndex(b) - 1), at))
+    return found
+
+
+def _share_vertex(a, b) -> bool:
+    va, vb = index_map(a, TopAbs_VERTEX), index_map(b, TopAbs_VERTEX)
+    return any(vb.Contains(va.FindKey(i)) for i in range(1, va.Size() + 1))
+
+
+def step_content(path: str | os.PathLike) -> str | None:
+    """What a STEP file that holds no solid holds instead, as words for a message ("1 open shell of 5 faces
+    (4 free edges)", "2 faces and no shell"), or None when it cannot be read or does hold a solid."""
+    reader = STEPControl_Reader()
+    try:
+        if reader.ReadFile(str(path)) != IFSelect_RetDone or reader.TransferRoots() == 0:
+            return None
+        shape = reader.OneShape()
+    except Exception:  # Standard_Failure on corrupt files
+        return None
+    if shape.IsNull() or len(shape_map(shape, TopAbs_SOLID)):
+        return None
+    shells = index_map(shape, TopAbs_SHELL)
+    faces = len(shape_map(shape, TopAbs_FACE))
+    if shells.Size():
+        open_ = [free_edges(shells.FindKey(i)) for i in range(1, shells.Size() + 1)]
+        n_open = sum(1 for f in open_ if f)
+        what = (f"{shells.Size()} shell{'s' if shells.Size() > 1 else ''} of {faces} face{'s' if faces != 1 else ''}"
+                + (f", {n_open} of them open ({sum(open_)} free edges)" if n_open and shells.Size() > 1
+                   else f", open ({sum(open_)} free edges)" if n_open else ", closed"))
+        return what
+    if faces:
+        return f"{faces} loose face{'s' if faces != 1 else ''}"
+    edges = len(shape_map(shape, TopAbs_EDGE))
+    return f"{edges} edge{'s' if edges != 1 else ''} and no face" if edges else "no face"

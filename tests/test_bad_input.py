@@ -1,0 +1,501 @@
+"""Bad input: one test per row of the README's "Bad input" table, through the command line.
+
+Each refusal is checked as a user meets it: ``hot2cold.cli.main([...])``, its exit code, one line on stderr
+that starts ``hot2cold: error:`` and says what is wrong (the regular expressions are the table's messages),
+no traceback, nothing on stdout (``-q``), and no output file or temporary file left behind.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hot2cold import cli
+from hot2cold.cli import main
+from hot2cold.kernel.sampling import fe_surface_nodes
+from hot2cold.synthetic import AffineField
+
+FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
+
+
+def _box():
+    import cadquery as cq
+    return cq.Workplane().box(10, 10, 10).val()
+
+
+def _write_field(path, points, disp, ids=False):
+    header = "id,x,y,z,dx,dy,dz" if ids else "x,y,z,dx,dy,dz"
+    rows = np.column_stack(([np.arange(len(points))] if ids else []) + [points, disp])
+    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt="%.12g")
+    return path
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory):
+    """A 10 mm box as STEP, its FE-like surface nodes (1 mm apart) and a thermal field on them."""
+    folder = tmp_path_factory.mktemp("box")
+    shape = _box()
+    step = folder / "box.step"
+    shape.exportStep(str(step))
+    nodes = fe_surface_nodes(shape.wrapped, 1.0, seed=1)[0]
+    return step, nodes, _write_field(folder / "box_field.csv", nodes, FIELD(nodes))
+
+
+@pytest.fixture
+def out(tmp_path):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    return folder / "cold.step"
+
+
+def _left(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def _refused(capsys, argv, code, pattern, out=None):
+    """Run ``hot2cold argv`` (quiet); check the exit code, that stderr is the one line ``hot2cold: error: ``
+    + a match of ``pattern``, that stdout is empty and that ``out``'s folder holds nothing new."""
+    before = _left(out.parent) if out is not None else None
+    assert main([*argv, "-q"]) == code
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert "Traceback" not in captured.err and captured.out == ""
+    assert lines[0].startswith("hot2cold: error: "), lines[0]
+    message = lines[0][len("hot2cold: error: "):]
+    assert re.match(pattern, message), message
+    if out is not None:
+        assert _left(out.parent) == before          # no output, no temporary file
+    return message
+
+
+def _morph(hot, field, out, *more):
+    return ["morph", str(hot), str(field), "-o", str(out), *more]
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The STEP file
+# ---------------------------------------------------------------------------------------------------------
+def test_step_missing(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(tmp_path / "nope.step", box[2], out), 2,
+             r"STEP file not found: .*nope\.step; check the path$", out)
+
+
+def test_step_is_a_folder(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(tmp_path, box[2], out), 2, r"STEP file .* is a folder: give the file itself$", out)
+
+
+def test_step_unreadable(tmp_path, box, out, capsys, monkeypatch):
+    hot = tmp_path / "locked.step"
+    hot.write_bytes(box[0].read_bytes())
+    hot.chmod(0)
+    real = os.access
+    # (root may read any file: the permission test itself is what is simulated)
+    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+                        False if mode == os.R_OK and Path(p) == hot else real(p, mode, *a, **k))
+    _refused(capsys, _morph(hot, box[2], out), 2,
+             r"cannot read STEP file .*locked\.step: permission denied; check its permissions$", out)
+
+
+def test_step_empty(tmp_path, box, out, capsys):
+    hot = tmp_path / "empty.step"
+    hot.write_bytes(b"")
+    _refused(capsys, _morph(hot, box[2], out), 2, r"STEP file is empty: .*empty\.step$", out)
+
+
+@pytest.mark.parametrize("content", ["this is not STEP\n", "truncated"])
+def test_step_corrupt(tmp_path, box, out, capsys, content):
+    hot = tmp_path / "corrupt.step"
+    text = box[0].read_text()
+    hot.write_text(text[: len(text) // 2] if content == "truncated" else content)
+    _refused(capsys, _morph(hot, box[2], out), 2,
+             r"cannot read STEP file .*corrupt\.step: not a valid STEP file \(reader status IFSelect_RetFail\)$",
+             out)
+
+
+def test_step_with_faces_but_no_solid(tmp_path, box, out, capsys):
+    import cadquery as cq
+    hot = tmp_path / "face.step"
+    cq.Face.makePlane(10, 10).exportStep(str(hot))
+    _refused(capsys, _morph(hot, box[2], out), 2,
+             r"STEP file .*face\.step holds no solid, only 1 shell of 1 face, open \(4 free edges\): hot2cold "
+             r"morphs closed solids; close it \(sew it, add the missing faces\) and make a solid of it in CAD$", out)
+
+
+def test_step_open_shell(tmp_path, box, out, capsys):
+    import cadquery as cq
+    hot = tmp_path / "open.step"
+    cq.Shell.makeShell([f for f in _box().Faces() if f.Center().z < 4.9]).exportStep(str(hot))
+    _refused(capsys, _morph(hot, box[2], out), 2,
+             r"STEP file .*open\.step holds no solid, only 1 shell of 5 faces, open \(4 free edges\): hot2cold "
+             r"morphs closed solids; close it .* and make a solid of it in CAD$", out)
+
+
+def test_step_closed_shell_without_solid(tmp_path, box, out, capsys):
+    import cadquery as cq
+    hot = tmp_path / "shell.step"
+    cq.Shell.makeShell(_box().Faces()).exportStep(str(hot))
+    _refused(capsys, _morph(hot, box[2], out), 2,
+             r"STEP file .*shell\.step holds no solid, only 1 shell of 6 faces, closed: hot2cold morphs closed "
+             r"solids; make a solid of it in CAD$", out)
+
+
+def test_solid_that_is_not_closed(box):
+    """A STEP reader makes a shell of an open solid; from Python an open solid is refused before the morph."""
+    import cadquery as cq
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Solid
+
+    from hot2cold.errors import InputError
+    from hot2cold.morph import morph
+    solid = TopoDS_Solid()
+    builder = BRep_Builder()
+    builder.MakeSolid(solid)
+    builder.Add(solid, cq.Shell.makeShell([f for f in _box().Faces() if f.Center().z < 4.9]).wrapped)
+    nodes = box[1][box[1][:, 2] < 4.9]
+    with pytest.raises(InputError, match=r"^hot solid 0 is not closed: 4 of its edges bound only one face \(an "
+                                         r"open shell, a missing or unsewn face\); hot2cold morphs closed solids: "
+                                         r"sew or repair the part in CAD$") as info:
+        morph(solid, (nodes, FIELD(nodes)))
+    assert info.value.exit_code == 2
+
+
+@pytest.mark.parametrize("kind", ["compound", "assembly"])
+def test_several_solids_and_assemblies_are_all_morphed(tmp_path, out, capsys, kind):
+    import cadquery as cq
+    shape = _box()
+    other = shape.translate(cq.Vector(30, 0, 0))
+    hot = tmp_path / f"{kind}.step"
+    if kind == "compound":
+        cq.Compound.makeCompound([shape, other]).exportStep(str(hot))
+    else:
+        cq.Assembly().add(shape, name="left").add(other, name="right").export(str(hot))
+    nodes = fe_surface_nodes(cq.Compound.makeCompound([shape, other]).wrapped, 1.0, seed=1)[0]
+    field = _write_field(tmp_path / "field.csv", nodes, FIELD(nodes))
+    report = tmp_path / "report.json"
+    assert main(_morph(hot, field, out, "--report", str(report), "-q")) == 0
+    data = json.loads(report.read_text())
+    assert len(data["solids"]) == 2 and all(s["valid"] and s["free_edges"] == 0 for s in data["solids"])
+    assert data["delta_max"] < 1e-9 and out.exists()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The field file
+# ---------------------------------------------------------------------------------------------------------
+def test_field_missing(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(box[0], tmp_path / "nope.csv", out), 2,
+             r"field file not found: .*nope\.csv; check the path$", out)
+
+
+def test_field_is_a_folder(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(box[0], tmp_path, out), 2, r"field file .* is a folder: give the file itself$", out)
+
+
+def test_field_unreadable(tmp_path, box, out, capsys, monkeypatch):
+    field = tmp_path / "locked.csv"
+    field.write_bytes(box[2].read_bytes())
+    real = os.access
+    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+                        False if mode == os.R_OK and Path(p) == field else real(p, mode, *a, **k))
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r"cannot read field file .*locked\.csv: permission denied; check its permissions$", out)
+
+
+@pytest.mark.parametrize("content, pattern", [
+    ("", r"field file .*f\.csv is empty; it needs a header line naming x,y,z,dx,dy,dz and one line per FE node$"),
+    ("x,y,z,dx,dy\n1,2,3,4,5\n",
+     r"field file .*f\.csv lacks column\(s\) dz \(header found: 'x', 'y', 'z', 'dx', 'dy', comma-separated\); the "
+     r"header must name the columns x,y,z,dx,dy,dz \(any order, any case\)$"),
+    ("x,y,z,dx,dy,dz\n",
+     r"field file .*f\.csv has a header but no data lines; add one line per FE node \(x, y, z, dx, dy, dz\)$"),
+    ("x,y,z,dx,dy,dz\n1,2,abc,0,0,0\n",
+     r"field file .*f\.csv line 2, column 'z' has 'abc', which is not a number; fix or remove that line$"),
+    ("x,y,z,dx,dy,dz\n1,2,3,0,0,0\n1,2,3,0,0\n",
+     r"field file .*f\.csv line 3 has 5 fields but the header has 6 \(comma-separated\); give every line one "
+     r"value per header column$"),
+    ("x,y,z,dx,dy,dz\n1,2,3,nan,0,0\n",
+     r"field file .*f\.csv has 1 NaN or inf value\(s\), the first on line 2 \(column 'dx': nan\); the field must "
+     r"be finite: fix or remove those lines$"),
+    ("x,y,z,dx,dy,dz\n1,2,3,0,-inf,0\n", r"field file .*f\.csv has 1 NaN or inf value\(s\), the first on line 2 "
+                                         r"\(column 'dy': -inf\)"),
+    ("1,2,3,0,0,0\n", r"field file .*f\.csv has no header line: line 1 \('1,2,3,0,0,0'\) holds numbers; add a first "
+                      r"line naming the columns, e\.g\. x,y,z,dx,dy,dz$"),
+], ids=["empty", "missing column", "no rows", "text", "short line", "nan", "inf", "no header"])
+def test_malformed_text_field(tmp_path, box, out, capsys, content, pattern):
+    field = tmp_path / "f.csv"
+    field.write_text(content)
+    _refused(capsys, _morph(box[0], field, out), 2, pattern, out)
+
+
+def test_binary_field(tmp_path, box, out, capsys):
+    field = tmp_path / "f.csv"
+    field.write_bytes(bytes(range(256)) * 4)
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r"field file .*f\.csv is binary, neither a text table nor an \.npz file; export the field as CSV with "
+             r"columns x,y,z,dx,dy,dz$", out)
+
+
+def test_truncated_npz_field(tmp_path, box, out, capsys):
+    good = tmp_path / "good.npz"
+    np.savez(good, points=box[1], displacements=FIELD(box[1]))
+    field = tmp_path / "f.npz"
+    field.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r"cannot read field file .*f\.npz as \.npz: .*; save it with np\.savez\(path, points=\.\.\., "
+             r"displacements=\.\.\.\)$", out)
+
+
+def test_duplicate_nodes_with_different_displacements(tmp_path, box, out, capsys):
+    nodes = box[1]
+    disp = FIELD(nodes)
+    points = np.concatenate([nodes, nodes[[3, 7]]])
+    moved = np.concatenate([disp, disp[[3, 7]] + [0.05, 0.0, 0.0]])
+    field = _write_field(tmp_path / "dup.csv", points, moved, ids=True)
+    n = len(nodes)
+    _refused(capsys, _morph(box[0], field, out), 2,
+             rf"field .*dup\.csv has 2 positions with duplicate nodes of different displacements, e\.g\. \(.*\) mm: "
+             rf"rows 3 and {n} \(from 0, node ids 3 and {n}\) move by \(.*\) and \(.*\) mm; a position takes one "
+             rf"displacement: merge the coincident nodes in the FE model or drop one of them$", out)
+
+
+def test_duplicate_nodes_with_the_same_displacement_are_merged(tmp_path, box, out, capsys, caplog):
+    nodes = box[1]
+    points = np.concatenate([nodes, nodes[:10]])
+    field = _write_field(tmp_path / "dup.csv", points, FIELD(points))
+    report = tmp_path / "r.json"
+    with caplog.at_level("INFO", logger="hot2cold.field"):
+        assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
+    assert "10 duplicate nodes at the same position as another with the same displacement merged" in caplog.text
+    assert json.loads(report.read_text())["nodes_total"] == len(nodes)
+
+
+@pytest.mark.parametrize("scale, pattern", [
+    (1e-3, r"the field looks like metres: use --field-units m \(units='m'\)$"),
+    (1 / 25.4, r"the field looks like inches: convert it to mm$"),
+    (1e3, r"the field is 1000 times larger than the part: is the part in metres or the field in µm\?$"),
+    (25.4, r"the field is 25\.4 times larger than the part: is the part modelled in inches but written as mm\?$"),
+], ids=["metres", "inches", "x1000", "x25.4"])
+def test_field_in_the_wrong_units(tmp_path, box, out, capsys, scale, pattern):
+    nodes = box[1]
+    field = _write_field(tmp_path / "units.csv", nodes * scale, FIELD(nodes) * scale)
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r".*units\.csv spans [\d.e+]+ mm but the part 17\.32 mm and 100 % of its nodes are off the part: "
+             + pattern, out)
+
+
+def test_nodes_far_from_the_part(tmp_path, box, out, capsys):
+    nodes = box[1]
+    field = _write_field(tmp_path / "far.csv", nodes + 500.0, FIELD(nodes))
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r"no FE node of .*far\.csv lies within 0\.0173 mm of the part \(nodes are [\d.]+ to [\d.]+ mm from its "
+             r"centre, the part is 17\.32 mm across\): check the field's units \(--field-units\) and that it belongs "
+             r"to this part, or raise --node-distance$", out)
+
+
+def test_some_nodes_far_from_the_part_are_ignored_and_counted(tmp_path, box, out, capsys):
+    nodes = box[1]
+    far = nodes[:50] + 500.0
+    points = np.concatenate([nodes, far])
+    field = _write_field(tmp_path / "some.csv", points, FIELD(points))
+    report = tmp_path / "r.json"
+    assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
+    assert json.loads(report.read_text())["nodes_ignored"] == 50
+    assert capsys.readouterr().err == ""
+
+
+def _top_missing(box, tmp_path):
+    nodes = box[1][box[1][:, 2] < 4.99]
+    return _write_field(tmp_path / "partial.csv", nodes, FIELD(nodes))
+
+
+def test_field_that_misses_a_face(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(box[0], _top_missing(box, tmp_path), out), 2,
+             r".*partial\.csv covers only part of the solid: 1 of its 6 faces gets no FE node within 0\.0173 mm where "
+             r"the node density of the other faces would put 10 or more: face \d near \(0, 0, 5\) mm \(\d+\); give a "
+             r"field over the whole part, or --extrapolate \(Settings\.extrapolate\) to morph such faces from the "
+             r"field of the others$", out)
+
+
+def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
+    report = tmp_path / "r.json"
+    assert main(_morph(box[0], _top_missing(box, tmp_path), out, "--extrapolate", "--report", str(report))) == 0
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
+    assert len(warnings) == 1 and "Traceback" not in err
+    assert re.match(r"WARNING hot2cold\.morph: .*partial\.csv covers only part of the solid: 1 of its 6 faces gets no "
+                    r"FE node .*; they are morphed from the field of the other faces, extrapolated \(--extrapolate\)$",
+                    warnings[0])
+    data = json.loads(report.read_text())
+    assert out.exists() and data["valid"] and data["delta_max"] < 1e-9
+    # an affine field's continuation is the field itself: the top face lands where the field takes it
+    assert max(f["artificial_nodes"] for f in data["faces"]) > 0
+
+
+def test_displacements_that_turn_the_part_inside_out(tmp_path, box, out, capsys):
+    """x -> -x: every face turns over, the volume changes sign; the report is written, the STEP is not."""
+    nodes = box[1]
+    field = _write_field(tmp_path / "mirror.csv", nodes, np.column_stack([-2.0 * nodes[:, 0], 0 * nodes[:, :2]]))
+    report = tmp_path / "r.json"
+    _refused(capsys, _morph(box[0], field, out, "--report", str(report)), 4,
+             r"cold solid 0 is turned inside out \(volume hot 1000 mm³, cold -1000 mm³\) \(and 4 more problems, see "
+             r"the log\): the displacements are too large for this part \(check the field's units and scale, and that "
+             r"it belongs to this part\); not written$", out)
+    data = json.loads(report.read_text())
+    assert not data["valid"] and not data["solids"][0]["valid"]
+
+
+def test_displacements_that_fold_a_face(tmp_path, out, capsys):
+    """The middle of a plate's top face (a 12 x 12 B-spline patch) squeezed past itself, x -> -1.5 x at the
+    centre: the face folds over there, and the check says where."""
+    import cadquery as cq
+    top = cq.Face.makeSplineApprox([[cq.Vector(x, y, 2.0 + 0.3 * np.sin(x / 3) * np.cos(y / 3))
+                                     for y in np.linspace(-10, 10, 12)] for x in np.linspace(-10, 10, 12)],
+                                   tol=1e-6, minDeg=3, maxDeg=3)
+    plate = cq.Solid.extrudeLinear(top, cq.Vector(0, 0, -4.0))
+    hot = tmp_path / "plate.step"
+    plate.exportStep(str(hot))
+    nodes = fe_surface_nodes(plate.wrapped, 0.5, seed=1)[0]
+    squeeze = -2.5 * np.exp(-np.hypot(nodes[:, 0], nodes[:, 1]) ** 2 / 8.0) * (nodes[:, 2] > 1.0)
+    field = _write_field(tmp_path / "fold.csv", nodes,
+                         np.column_stack([squeeze * nodes[:, 0], squeeze * nodes[:, 1], 0 * squeeze]))
+    _refused(capsys, _morph(hot, field, out), 4,
+             r"cold solid 0 folds: face \d+ turns over at \d+ of \d+ points, e\.g\. near \(.*\) mm, the field moving it "
+             r"by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large for this part "
+             r"\(check the field's units and scale, and that it belongs to this part\); not written$", out)
+
+
+def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
+    """A fork whose two tines are bent towards each other until they pass through each other."""
+    import cadquery as cq
+    fork = cq.Workplane().box(20, 30, 10).cut(cq.Workplane().box(4, 20, 10).translate((0, 5, 0))).val()
+    hot = tmp_path / "fork.step"
+    fork.exportStep(str(hot))
+    nodes = fe_surface_nodes(fork.wrapped, 1.0, seed=1)[0]
+    bend = np.where(nodes[:, 1] > -5.0, 0.012 * (nodes[:, 1] + 5.0) ** 2, 0.0) * -np.sign(nodes[:, 0])
+    field = _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
+    _refused(capsys, _morph(hot, field, out), 4,
+             r"cold solid 0 crosses itself: (edges|faces|edge \d+ and face) \d+ and \d+ intersect near \(.*\) mm.*: "
+             r"the displacements are too large for this part .*; not written$", out)
+
+
+def test_bent_fork_that_does_not_cross_is_written(tmp_path, out, capsys):
+    """The same fork bent less: the gap closes by more than half, the kernel is asked, and it is fine."""
+    import cadquery as cq
+    fork = cq.Workplane().box(20, 30, 10).cut(cq.Workplane().box(4, 20, 10).translate((0, 5, 0))).val()
+    hot = tmp_path / "fork.step"
+    fork.exportStep(str(hot))
+    nodes = fe_surface_nodes(fork.wrapped, 1.0, seed=1)[0]
+    bend = np.where(nodes[:, 1] > -5.0, 0.004 * (nodes[:, 1] + 5.0) ** 2, 0.0) * -np.sign(nodes[:, 0])
+    field = _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
+    assert main(_morph(hot, field, out, "-q")) == 0 and out.exists()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Outputs
+# ---------------------------------------------------------------------------------------------------------
+def test_output_equal_to_the_input(tmp_path, box, capsys):
+    hot = tmp_path / "hot.step"
+    hot.write_bytes(box[0].read_bytes())
+    _refused(capsys, _morph(hot, box[2], hot), 2, r"output .*hot\.step is the input file: choose another name$")
+    assert hot.read_bytes() == box[0].read_bytes()
+    _refused(capsys, _morph(box[0], box[2], tmp_path / "c.step", "--report", str(box[2])), 2,
+             r"report .*box_field\.csv is the input file: choose another name$")
+
+
+def test_output_folder_missing(tmp_path, box, capsys):
+    _refused(capsys, _morph(box[0], box[2], tmp_path / "no" / "c.step"), 2,
+             r"folder for output .*c\.step does not exist: create it first$")
+    assert not (tmp_path / "no").exists()
+
+
+def test_output_folder_not_writable(box, out, capsys, monkeypatch):
+    real = os.access
+    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+                        False if mode == os.W_OK and Path(p) == out.parent else real(p, mode, *a, **k))
+    _refused(capsys, _morph(box[0], box[2], out), 2,
+             r"folder for output .*cold\.step is not writable: choose another folder or fix its permissions$", out)
+
+
+def test_output_is_a_folder(tmp_path, box, out, capsys):
+    _refused(capsys, _morph(box[0], box[2], out.parent), 2, r"output .*out is a folder: give a file name$", out)
+
+
+def test_two_outputs_to_one_file(box, out, capsys):
+    _refused(capsys, _morph(box[0], box[2], out, "--stl", str(out)), 2,
+             r"--stl and output are the same file .*cold\.step: choose another name$", out)
+
+
+def test_output_that_cannot_be_written(box, out, capsys, monkeypatch):
+    """The disk fills up while the STEP is written: exit 6, the report (written first) named, no STEP and no
+    temporary file."""
+    import errno
+
+    import hot2cold.kernel.step as step
+    real = step.write_atomically
+
+    def failing(jobs):
+        def write(tmp):
+            Path(tmp).write_bytes(b"ISO-10303-21;\n")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real([(path, write) for path, _ in jobs])
+
+    monkeypatch.setattr(step, "write_atomically", failing)
+    report = out.with_name("r.json")
+    message = _refused(capsys, _morph(box[0], box[2], out, "--report", str(report)), 6,
+                       r"cannot write .*cold\.step: No space left on device \(.*r\.json written\)$")
+    assert _left(out.parent) == ["r.json"], message
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Interrupted runs
+# ---------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("with_report", [False, True])
+def test_interrupt_while_the_step_is_written(box, out, capsys, monkeypatch, with_report):
+    """Ctrl-C while the kernel writes the cold STEP (its temporary file complete, not yet renamed): exit 130,
+    no STEP and no temporary file; the message names what was written."""
+    import hot2cold.kernel.step as step
+    real = step.write_atomically
+    seen = []
+
+    def interrupted(jobs):
+        def wrap(write):
+            def write_then_stop(tmp):
+                write(tmp)
+                seen.append(os.path.getsize(tmp))
+                raise KeyboardInterrupt
+            return write_then_stop
+        return real([(path, wrap(write)) for path, write in jobs])
+
+    monkeypatch.setattr(step, "write_atomically", interrupted)
+    report = out.with_name("r.json")
+    argv = _morph(box[0], box[2], out, "-q", *(["--report", str(report)] if with_report else []))
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert seen and seen[0] > 0                       # the interrupt came with a whole temporary STEP on disk
+    written = str(report) if with_report else "nothing"
+    assert err == f"hot2cold: interrupted; {written} written\n"
+    assert _left(out.parent) == (["r.json"] if with_report else [])
+
+
+def test_ctrl_c_in_a_running_morph(tmp_path, box):
+    """A real SIGINT during the morph of the console script: exit 130, one line, no file left."""
+    out = tmp_path / "cold.step"
+    proc = subprocess.Popen([sys.executable, "-m", "hot2cold", "morph", str(box[0]), str(box[2]), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stderr.readline()                # "load: done": the morph is under way
+        assert line.startswith("load"), line
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    assert err.splitlines()[-1] == "hot2cold: interrupted; nothing written" and "Traceback" not in err
+    assert _left(tmp_path) == []
