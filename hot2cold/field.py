@@ -115,7 +115,10 @@ class DisplacementField:
         arrays = {}
         for name in ("points", "displacements"):
             try:
-                a = np.array(getattr(self, name), dtype=np.float64, order="C", copy=True)
+                given = getattr(self, name)
+                if np.iscomplexobj(given):
+                    raise TypeError("complex numbers")
+                a = np.array(given, dtype=np.float64, order="C", copy=True)
             except (TypeError, ValueError) as exc:
                 raise FieldError(
                     f"field{where}: {name} is not an array of numbers ({_one_line(exc)}); "

@@ -387,3 +387,31 @@ def test_npz_field_name(tmp_path):
     np.testing.assert_array_equal(read_field(path, field_name="U").displacements, DSP)
     with pytest.raises(FieldError, match="lacks array.* displacements"):
         read_field(path)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Duplicate nodes, complex numbers
+# ---------------------------------------------------------------------------------------------------------
+def test_frd_coincident_nodes_of_unmerged_meshes(tmp_path):
+    """Two node numbers at one position (two meshes never merged): the same displacement is one node, another
+    is refused with both node numbers."""
+    xyz = XYZ.copy()
+    xyz[4] = xyz[1]                                        # node 11 sits where node 2 is
+    same = U1.copy()
+    same[4] = same[1]
+    text = "\n".join(["    1C"] + node_block(IDS, xyz) + disp(same) + [" 9999"])
+    f = read_field(write(tmp_path, text))
+    assert len(f) == 5 and 11 not in f.node_ids
+    other = same.copy()
+    other[4, 0] += 0.01
+    text = "\n".join(["    1C"] + node_block(IDS, xyz) + disp(other) + [" 9999"])
+    with pytest.raises(FieldError, match=r"has 1 position with duplicate nodes of different displacements, e\.g\. "
+                                         r"\(40, -8, 0\.5\) mm: rows 1 and 4 \(from 0, node ids 2 and 11\)"):
+        read_field(write(tmp_path, text, "other.frd"))
+
+
+def test_npz_complex_numbers_refused(tmp_path):
+    path = tmp_path / "c.npz"
+    np.savez(path, points=PTS.astype(complex), displacements=DSP)
+    with pytest.raises(FieldError, match=r"points is not an array of numbers \(complex numbers\)"):
+        read_field(path)
