@@ -112,7 +112,7 @@ class Projector:
         """Face ``k``'s raster, with more cells the more ``points`` it is asked about at once (the share of
         points left to the kernel falls as the cells shrink); built again, finer, when a larger request
         comes."""
-        cells = int(np.clip(2 ** np.ceil(np.log2(2.0 * np.sqrt(points))), *RASTER_CELLS))
+        cells = int(np.clip(2 ** np.ceil(np.log2(2.0 * np.sqrt(max(points, 1)))), *RASTER_CELLS))
         raster = self._raster.get(k)
         if raster is None or raster.state.shape[0] < cells:
             face = self._faces[k]
