@@ -154,3 +154,13 @@ def test_field_in_metres_without_units_is_caught(tmp_path, block_step, block_nod
     field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0, FIELD(block_nodes) / 1000.0)
     _refused(capsys, ["morph", str(block_step), str(field), "-o", str(tmp_path / "c.step")], 2,
              "metres", "--field-units m")
+
+
+def test_help_lists_extrapolate_and_both_commands(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["morph", "--help"])
+    assert info.value.code == 0
+    assert "--extrapolate" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["batch", "--help"])
+    assert "JOBS" in capsys.readouterr().out
