@@ -21,9 +21,9 @@ def write_atomically(jobs: list[tuple[Path, Callable[[str], object]]]) -> None:
             folder = path.parent if str(path.parent) else Path(".")
             # opened with open(): unlike mkstemp's 0600, the file gets the umask's permissions
             tmp = folder / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
+            temps.append(tmp)           # before it exists: an interrupt right after open() leaves nothing
             with open(tmp, "xb"):
                 pass
-            temps.append(tmp)
             write(str(tmp))
         for (path, _), tmp in zip(jobs, temps):
             current = path

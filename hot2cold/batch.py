@@ -74,6 +74,7 @@ class Job:
     max_refinements: int | None = None
     node_distance: float | None = None
     edge_distance: float | None = None
+    extrapolate: bool = False
 
     @property
     def record(self) -> Path:
@@ -86,13 +87,15 @@ class Job:
         return out + [("record", self.record)]
 
     def settings(self) -> Settings:
-        return settings_for(self.tolerance, self.max_refinements, self.node_distance, self.edge_distance)
+        return settings_for(self.tolerance, self.max_refinements, self.node_distance, self.edge_distance,
+                            self.extrapolate)
 
     def options(self) -> dict:
         """The options that change the cold part, as JSON-ready values."""
         return {"field_units": self.field_units, "field_name": self.field_name, "invert": self.invert,
                 "tolerance": self.tolerance, "max_refinements": self.max_refinements,
-                "node_distance": self.node_distance, "edge_distance": self.edge_distance}
+                "node_distance": self.node_distance, "edge_distance": self.edge_distance,
+                "extrapolate": self.extrapolate}
 
 
 OPTIONS = tuple(f.name for f in fields(Job))
@@ -102,11 +105,13 @@ OPTIONS = tuple(f.name for f in fields(Job))
 # One morph: shared by `hot2cold morph` and the batch workers
 # --------------------------------------------------------------------------------------------------------
 def settings_for(tolerance: float | None = None, max_refinements: int | None = None,
-                 node_distance: float | None = None, edge_distance: float | None = None) -> Settings:
+                 node_distance: float | None = None, edge_distance: float | None = None,
+                 extrapolate: bool = False) -> Settings:
     """:class:`Settings` from the command-line options (None: the default); :class:`InputError` on a bad value."""
     try:
         rounds = {} if max_refinements is None else {"max_refinements": max_refinements}
-        return Settings(node_distance=node_distance, edge_distance=edge_distance, tolerance=tolerance, **rounds)
+        return Settings(node_distance=node_distance, edge_distance=edge_distance, tolerance=tolerance,
+                        extrapolate=extrapolate, **rounds)
     except ValueError as exc:
         raise InputError(str(exc)) from exc
 
@@ -313,7 +318,7 @@ def _count(value, folder: Path) -> int:
 _CONVERT: dict[str, Callable] = {
     "name": _text, "hot": _path, "field": _path, "output": _path, "report": _path, "field_units": _units,
     "field_name": _text, "invert": _flag, "tolerance": _number, "max_refinements": _count,
-    "node_distance": _number, "edge_distance": _number}
+    "node_distance": _number, "edge_distance": _number, "extrapolate": _flag}
 
 
 def _check_jobs(path: Path, wheres: list[str], jobs: list[Job], summary) -> None:

@@ -27,7 +27,6 @@ import math
 import os
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from . import __version__
@@ -89,7 +88,7 @@ def _parser() -> argparse.ArgumentParser:
                        description="Run the morphs listed in JOBS (CSV: a header hot,field,output[,options] and a "
                        "row per job; TOML: [[jobs]] tables and an optional [defaults] table). Options as for "
                        "morph: name, report, field_units, field_name, invert, tolerance, max_refinements, "
-                       "node_distance, edge_distance. Relative paths are relative to JOBS' folder. A job whose "
+                       "node_distance, edge_distance, extrapolate. Relative paths are relative to JOBS' folder. A job whose "
                        "cold STEP and record (OUTPUT.hot2cold.json) show the same inputs is skipped. Exit code "
                        "0: all ok or skipped; 1: a job failed; 5: a tolerance missed; 2: unusable JOBS.")
     b.add_argument("jobs", type=Path, metavar="JOBS", help="jobs file, .csv or .toml")
@@ -242,8 +241,8 @@ def _morph(args) -> int:
     _check_options(args)
     if args.html:
         _html_writer()
-    settings = replace(settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance),
-                       extrapolate=args.extrapolate)
+    settings = settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance,
+                            args.extrapolate)
     progress = None if args.quiet else _Progress(sys.stderr)
     try:
         result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,

@@ -329,7 +329,7 @@ def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
     assert len(warnings) == 1 and "Traceback" not in err
-    assert re.match(r"WARNING hot2cold\.morph: .*partial\.csv covers only part of the solid: 1 of its 6 faces gets no "
+    assert re.match(r"WARNING hot2cold\.checks: .*partial\.csv covers only part of the solid: 1 of its 6 faces gets no "
                     r"FE node .*; they are morphed from the field of the other faces, extrapolated \(--extrapolate\)$",
                     warnings[0])
     data = json.loads(report.read_text())

@@ -215,6 +215,13 @@ def test_csv_and_toml_give_the_same_jobs(project):
     assert job.hot == project / "hot.step" and job.report == project / "cold" / "a.json"
     assert (job.field_units, job.invert, job.tolerance, job.max_refinements) == ("m", True, 1e-3, 2)
     assert job.settings().tolerance == 1e-3
+    assert not job.settings().extrapolate
+
+
+def test_extrapolate_reaches_the_settings_of_a_job(project):
+    (job,) = batch.read_jobs(_jobs_csv(project, ["x,hot.step,op0.csv,cold/x.step,true"],
+                                       "name,hot,field,output,extrapolate"))
+    assert job.extrapolate and job.settings().extrapolate and job.options()["extrapolate"] is True
 
 
 def test_stale_or_half_written_output_is_not_skipped(project):
