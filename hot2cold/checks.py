@@ -73,6 +73,9 @@ _NAMED = 6
 #: A face without FE nodes where the node density of the faces with nodes would put at least this many is
 #: not covered by the field (with fewer, it is a small face or a sparse field: its nodes are artificial).
 _EXPECTED_NODES = 10
+#: ... and so is one that holds at least this share of the part's surface, however sparse the field (three
+#: nodes on a blade left both of its sides without one, and the density rule let it through).
+_LARGE_SHARE = 0.1
 
 
 def check_coverage(part: Part, cls: Classification, field: DisplacementField, settings: Settings) -> None:
@@ -81,8 +84,9 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     no FE node (unless ``settings.extrapolate``: then a warning).
 
     A face without nodes counts as not covered where the density of the nodes used on the other faces (per
-    mm^2) would put ``_EXPECTED_NODES`` or more on it; a face smaller than that, or a sparse field, leaves
-    faces without nodes that the artificial nodes take care of (logged).
+    mm^2) would put ``_EXPECTED_NODES`` or more on it, or where it holds ``_LARGE_SHARE`` or more of the part's
+    surface; a face smaller than that, or a sparse field, leaves faces without nodes that the artificial
+    nodes take care of (logged).
     """
     extent = float(np.linalg.norm(np.ptp(field.points, axis=0))) if len(field) > 1 else 0.0
     ratio = extent / part.diagonal
@@ -106,11 +110,12 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
         return
     areas = face_areas(part.kernel.faces)
     expected = np.count_nonzero(cls.used) / max(float(areas[counts > 0].sum()), 1e-300) * areas
-    sparse = np.flatnonzero((counts == 0) & (expected < _EXPECTED_NODES))
+    large = areas >= _LARGE_SHARE * float(areas.sum())
+    sparse = np.flatnonzero((counts == 0) & (expected < _EXPECTED_NODES) & ~large)
     if len(sparse):
         log.info("face(s) %s get no FE node (%s expected from the node density): their nodes are artificial",
                  ", ".join(map(str, sparse)), ", ".join(f"{x:.2g}" for x in expected[sparse]))
-    empty = np.flatnonzero((counts == 0) & (expected >= _EXPECTED_NODES))
+    empty = np.flatnonzero((counts == 0) & ((expected >= _EXPECTED_NODES) | large))
     if not len(empty):
         return
     # a solid of several without a node is named as a whole, other faces one by one with a point on them
@@ -125,9 +130,11 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             at = evaluate_surface(face.surface, [(u0 + u1) / 2], [(v0 + v1) / 2])[0]
             names.append(f"face {k} near ({', '.join(f'{x:.4g}' for x in at)}) mm ({expected[k]:.0f})")
     listed = ", ".join(names[:_NAMED]) + (f" and {len(names) - _NAMED} more" if len(names) > _NAMED else "")
+    large_too = ("" if np.all(expected[empty] >= _EXPECTED_NODES) else
+                 f", or on a face that holds {100 * _LARGE_SHARE:.0f} % or more of the part's surface")
     what = (f"{len(empty)} of its {len(part.faces)} faces get{'s' if len(empty) == 1 else ''} no FE node within "
             f"{cls.node_distance:.3g} mm where the node density of the other faces would put {_EXPECTED_NODES} or "
-            f"more: {listed}")
+            f"more{large_too}: {listed}")
     if settings.extrapolate:
         log.warning("%s covers only part of the solid: %s; they are morphed from the field of the other faces, "
                     "extrapolated (--extrapolate)", source, what)

@@ -323,6 +323,20 @@ def test_field_that_misses_a_face(tmp_path, box, out, capsys):
              r"field of the others$", out)
 
 
+def test_very_sparse_field_that_leaves_a_large_face_bare(tmp_path, out, capsys):
+    """Three nodes on the bundled blade: the node density is too low for the density rule, but a side of the
+    blade (10 % or more of its surface) without a node is still a field that misses the part."""
+    blade = Path(__file__).resolve().parents[1] / "sample_parts" / "twisted_blade.step"
+    rows = (blade.parent / "twisted_blade_field.csv").read_text().splitlines()[:4]
+    field = tmp_path / "three.csv"
+    field.write_text("\n".join(rows) + "\n")
+    _refused(capsys, _morph(blade, field, out), 2,
+             r".*three\.csv covers only part of the solid: \d of its 6 faces gets? no FE node within 0\.109 mm where "
+             r"the node density of the other faces would put 10 or more, or on a face that holds 10 % or more of "
+             r"the part's surface: face 0 near .* mm \(0\).*; give a field over the whole part, or --extrapolate",
+             out)
+
+
 def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     report = tmp_path / "r.json"
     assert main(_morph(box[0], _top_missing(box, tmp_path), out, "--extrapolate", "--report", str(report))) == 0
