@@ -67,8 +67,7 @@ class Classification:
         (one sort of all nodes instead of a scan per owner)."""
         nodes = np.flatnonzero(self.role == role)
         nodes = nodes[np.argsort(self.owner[nodes], kind="stable")]
-        cuts = np.flatnonzero(np.diff(self.owner[nodes])) + 1
-        return [(int(self.owner[g[0]]), g) for g in np.split(nodes, cuts) if len(g)]
+        return [(k, nodes[run]) for k, run in _groups(self.owner[nodes])]
 
     @property
     def used(self) -> np.ndarray:

@@ -204,20 +204,17 @@ def _stats(d: np.ndarray) -> tuple[float, float]:
 
 
 def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,
-                projector: Projector, cold_surfaces: list | None = None) -> np.ndarray:
+                projector: Projector, cold_surfaces: list) -> np.ndarray:
     """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry (eq. 21).
 
-    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.  With the cold
-    surfaces ``cold_surfaces`` (one BSplineSurface per face) the face nodes' foot points are found by
-    Newton's method from their hot parameters (:mod:`hot2cold.footpoint`) and the kernel is asked only
-    where that does not settle.
+    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.  On the cold surfaces
+    ``cold_surfaces`` (one BSplineSurface per face) the face nodes' foot points are found by Newton's method
+    from their hot parameters (:mod:`hot2cold.footpoint`); the kernel is asked only where that does not
+    settle, and for the edge nodes.
     """
     errors = np.full(len(cls.role), np.nan)
     target = cls.foot + field.displacements
     for k, nodes in cls.groups(FACE):
-        if cold_surfaces is None:
-            errors[nodes] = projector.to_face(k, target[nodes])[1]
-            continue
         fp = project_to_surface(cold_surfaces[k], target[nodes], cls.uv[nodes], projector.face_box(k))
         errors[nodes] = fp.distance
         open_ = nodes[~fp.settled]

@@ -76,12 +76,9 @@ class Projector:
     def _surface_projector(self, k: int) -> GeomAPI_ProjectPointOnSurf:
         proj = self._surf.get(k)
         if proj is None:
-            face = self._faces[k]
-            surface = BRep_Tool.Surface_s(face)
-            u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
-            su0, su1, sv0, sv1 = surface.Bounds()       # a trimmed face's box may overshoot its surface
+            u0, u1, v0, v1 = self.face_box(k)
             proj = GeomAPI_ProjectPointOnSurf()
-            proj.Init(surface, max(u0, su0), min(u1, su1), max(v0, sv0), min(v1, sv1), Extrema_ExtAlgo_Grad)
+            proj.Init(BRep_Tool.Surface_s(self._faces[k]), u0, u1, v0, v1, Extrema_ExtAlgo_Grad)
             self._surf[k] = proj
         return proj
 
@@ -102,7 +99,8 @@ class Projector:
         return uv, dist
 
     def face_box(self, k: int) -> np.ndarray:
-        """The parameter box ``(u0, u1, v0, v1)`` :meth:`to_face` searches on face ``k``."""
+        """The parameter box ``(u0, u1, v0, v1)`` :meth:`to_face` searches on face ``k``: the face's box
+        within its surface's bounds (a trimmed face's box may overshoot its surface)."""
         face = self._faces[k]
         u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
         su0, su1, sv0, sv1 = BRep_Tool.Surface_s(face).Bounds()
