@@ -63,3 +63,12 @@ def face_deviation(result, exact_map, spacing: float) -> list[np.ndarray]:
         cold = evaluate_surface(morphed.surface, uv[:, 0], uv[:, 1])
         out.append(np.linalg.norm(cold - exact_map(hot), axis=1))
     return out
+
+
+@pytest.fixture(scope="session")
+def blade():
+    """The twisted blade morphed with its bundled field (19 182 nodes, 500 of them off the part); read-only,
+    shared by the tests of the report, its pictures and the viewer exports."""
+    from hot2cold.morph import morph
+    return morph(SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv")
+

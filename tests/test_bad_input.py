@@ -385,15 +385,21 @@ def test_displacements_that_fold_a_face(tmp_path, out, capsys):
              r"\(check the field's units and scale, and that it belongs to this part\); not written$", out)
 
 
-def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
-    """A fork whose two tines are bent towards each other until they pass through each other."""
+def _bent_fork(tmp_path, strength: float):
+    """A fork (STEP) and a field (CSV) that bends its two tines towards each other, the more the larger
+    ``strength`` (1/mm)."""
     import cadquery as cq
     fork = cq.Workplane().box(20, 30, 10).cut(cq.Workplane().box(4, 20, 10).translate((0, 5, 0))).val()
     hot = tmp_path / "fork.step"
     fork.exportStep(str(hot))
     nodes = fe_surface_nodes(fork.wrapped, 1.0, seed=1)[0]
-    bend = np.where(nodes[:, 1] > -5.0, 0.012 * (nodes[:, 1] + 5.0) ** 2, 0.0) * -np.sign(nodes[:, 0])
-    field = _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
+    bend = np.where(nodes[:, 1] > -5.0, strength * (nodes[:, 1] + 5.0) ** 2, 0.0) * -np.sign(nodes[:, 0])
+    return hot, _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
+
+
+def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
+    """A fork whose two tines are bent towards each other until they pass through each other."""
+    hot, field = _bent_fork(tmp_path, 0.012)
     _refused(capsys, _morph(hot, field, out), 4,
              r"cold solid 0 crosses itself: (edges|faces|edge \d+ and face) \d+ and \d+ intersect near \(.*\) mm.*: "
              r"the displacements are too large for this part .*; not written$", out)
@@ -401,13 +407,7 @@ def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
 
 def test_bent_fork_that_does_not_cross_is_written(tmp_path, out, capsys):
     """The same fork bent less: the gap closes by more than half, the kernel is asked, and it is fine."""
-    import cadquery as cq
-    fork = cq.Workplane().box(20, 30, 10).cut(cq.Workplane().box(4, 20, 10).translate((0, 5, 0))).val()
-    hot = tmp_path / "fork.step"
-    fork.exportStep(str(hot))
-    nodes = fe_surface_nodes(fork.wrapped, 1.0, seed=1)[0]
-    bend = np.where(nodes[:, 1] > -5.0, 0.004 * (nodes[:, 1] + 5.0) ** 2, 0.0) * -np.sign(nodes[:, 0])
-    field = _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
+    hot, field = _bent_fork(tmp_path, 0.004)
     assert main(_morph(hot, field, out, "-q")) == 0 and out.exists()
 
 

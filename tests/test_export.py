@@ -17,17 +17,9 @@ from hot2cold import export
 from hot2cold.errors import OutputError
 from hot2cold.classify import IGNORED
 from hot2cold.cli import _Progress, main
-from hot2cold.morph import morph
 from hot2cold.synthetic import AffineField
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 BLOCK_FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
-
-
-@pytest.fixture(scope="module")
-def blade():
-    """The twisted blade morphed with its bundled field (19 182 nodes, 500 of them off the part)."""
-    return morph(SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv")
 
 
 @pytest.fixture(scope="module")

@@ -17,15 +17,8 @@ from matplotlib.image import imread
 
 from hot2cold import html_report, visual
 from hot2cold.bspline import evaluate_surface
-from hot2cold.morph import morph
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-@pytest.fixture(scope="module")
-def blade():
-    return morph(SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv")
 
 
 @pytest.fixture(scope="module")
