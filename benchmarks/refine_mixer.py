@@ -8,7 +8,7 @@ distance between each edge of the exit face and the face, sampled at 2000 points
 the cold volume three ways: the report's (BRepGProp, default Gauss rule), BRepGProp's adaptive integration,
 and a triangulation of the cold solid (meaningful only where the faces meet their edges: the plain fit's
 0.7 mm gaps spoil it); against the reference, the triangulated hot solid moved by the field (the local
-estimate of :class:`hot2cold.artificial.FieldEstimator` from the foot points of every node).
+estimate of :class:`hot2cold.pipeline.artificial.FieldEstimator` from the foot points of every node).
 
 Measured (2 cores, other jobs running; the stage times vary by a factor 3 with the load):
 
@@ -47,7 +47,7 @@ from OCP.TopExp import TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS
 
-from hot2cold.morph import morph
+from hot2cold.pipeline.morph import morph
 from hot2cold.settings import Settings
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
@@ -121,7 +121,7 @@ def run(tolerance: float | None, reference: dict) -> None:
         print(f"  exit-face edge {use.edge}: gap sewn {report.edges[use.edge].gap:.2e} mm, at 2000 points "
               f"{dense_gap(edge, kernel.faces[EXIT_FACE]):.2e} mm, edge tolerance {BRep_Tool.Tolerance_s(edge):.2e}")
     if "estimator" not in reference:
-        from hot2cold.artificial import FieldEstimator
+        from hot2cold.pipeline.artificial import FieldEstimator
         used = result.classification.used
         estimator = FieldEstimator(result.classification.foot[used], result.field.displacements[used])
         reference["estimator"] = estimator

@@ -8,10 +8,10 @@ Run from the repository::
 
 For each size the bundled CalculiX field of the Rotor 37 blade (44 478 surface nodes) is resampled onto an
 FE-like surface node set of that size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`, displacements by
-the local fits of :class:`hot2cold.artificial.FieldEstimator`), saved as ``.npz`` under ``--cache`` (default
+the local fits of :class:`hot2cold.pipeline.artificial.FieldEstimator`), saved as ``.npz`` under ``--cache`` (default
 ``benchmarks/.cache``, made once).  Then, in a fresh process per size so that its peak memory is its own:
 
-* the morph, read from the ``.npz`` (``hot2cold.morph``), with the time of each phase: load (STEP and
+* the morph, read from the ``.npz`` (``hot2cold.pipeline.morph``), with the time of each phase: load (STEP and
   field), classify (classification and foot points), fit (edges, faces, G1), rebuild and sew, report, and
   write (the cold STEP); and the process's peak resident memory;
 * the direct approach, for sizes up to ``--direct-max`` (default 100 000; 1 M takes about 15 minutes):
@@ -51,7 +51,7 @@ def resampled(n: int, cache: Path) -> Path:
     path = cache / f"rotor37_{n}.npz"
     if path.exists():
         return path
-    from hot2cold.artificial import FieldEstimator
+    from hot2cold.pipeline.artificial import FieldEstimator
     from hot2cold.kernel.sampling import fe_surface_nodes
     from hot2cold.kernel.step import read_step
 
@@ -89,7 +89,7 @@ def direct(part, points: np.ndarray, node_distance: float):
 
 def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict:
     """Node-by-node comparison of the classification with the direct approach."""
-    from hot2cold.classify import EDGE, FACE, VERTEX
+    from hot2cold.pipeline.classify import EDGE, FACE, VERTEX
 
     part, cls = result.part, result.classification
     face = cls.role == FACE
@@ -116,7 +116,7 @@ def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict
 
 def one(n: int, field: Path, with_direct: bool) -> dict:
     """Run one size in this process; returns its figures."""
-    from hot2cold.morph import morph
+    from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
 
     settings = Settings()
@@ -138,7 +138,7 @@ def one(n: int, field: Path, with_direct: bool) -> dict:
         "face_rank": [f"{f.rank}/{f.unknowns}" for f in result.faces],
     }
     if with_direct:
-        from hot2cold.load import load_part
+        from hot2cold.pipeline.load import load_part
 
         hot = load_part(STEP, settings)          # the morph's own part holds the cold geometry by now
         node_distance, _ = settings.lengths(hot.diagonal)

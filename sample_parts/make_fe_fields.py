@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hot2cold.bspline import evaluate_surface
+from hot2cold.core.bspline import evaluate_surface
 from hot2cold.fe.calculix import hot_to_cold_field
 from hot2cold.kernel.step import read_step
 from hot2cold.kernel.topology import decompose

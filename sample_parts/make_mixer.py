@@ -38,7 +38,7 @@ from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
 from OCP.TopAbs import TopAbs_FACE, TopAbs_VERTEX
 from OCP.TopoDS import TopoDS, TopoDS_Solid
 
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.topology import shape_map
 
 HERE = Path(__file__).resolve().parent

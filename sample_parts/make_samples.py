@@ -12,8 +12,8 @@ fresh process rewrites byte-identical files (the STEP header's time stamp is fix
 * ``filleted_block.step``: a 60 x 40 x 20 mm block (centred at the origin) with its vertical edges filleted
   (r = 6) and then its top edges (r = 3): planes, cylinders and tori.
 * ``twisted_blade_field.csv`` / ``filleted_block_field.csv``: ``id,x,y,z,dx,dy,dz`` of FE-like surface nodes
-  (about 2 mm apart) plus 500 volume nodes, shuffled, displaced by an :class:`~hot2cold.synthetic.UntwistField`
-  and an :class:`~hot2cold.synthetic.AffineField` respectively.  Nodes are computed on the part as read back
+  (about 2 mm apart) plus 500 volume nodes, shuffled, displaced by an :class:`~hot2cold.testing.synthetic.UntwistField`
+  and an :class:`~hot2cold.testing.synthetic.AffineField` respectively.  Nodes are computed on the part as read back
   from its STEP file.
 """
 from __future__ import annotations
@@ -45,7 +45,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Shape, TopoDS_Solid
 from OCP.TopTools import TopTools_IndexedDataMapOfShapeListOfShape, TopTools_IndexedMapOfShape
 
 from hot2cold.kernel.sampling import face_list, fe_surface_nodes, volume_nodes
-from hot2cold.synthetic import AffineField, UntwistField
+from hot2cold.testing.synthetic import AffineField, UntwistField
 
 HERE = Path(__file__).resolve().parent
 #: mm between FE-like surface nodes.  The blade's leading- and trailing-edge faces are only ~6 mm wide

@@ -36,8 +36,8 @@ import cadquery as cq
 import numpy as np
 
 import hot2cold
-from hot2cold.field import read_field
-from hot2cold.morph import morph
+from hot2cold.io.field import read_field
+from hot2cold.pipeline.morph import morph
 
 exaggerate = 1.0
 show_nodes = True

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hot2cold.bspline import evaluate_surface
+from hot2cold.core.bspline import evaluate_surface
 from hot2cold.kernel.sampling import face_samples, fe_surface_nodes, volume_nodes
 from hot2cold.kernel.step import read_step
 
@@ -69,6 +69,6 @@ def face_deviation(result, exact_map, spacing: float) -> list[np.ndarray]:
 def blade():
     """The twisted blade morphed with its bundled field (19 182 nodes, 500 of them off the part); read-only,
     shared by the tests of the report, its pictures and the viewer exports."""
-    from hot2cold.morph import morph
+    from hot2cold.pipeline.morph import morph
     return morph(SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv")
 

@@ -20,7 +20,7 @@ import pytest
 from hot2cold import cli
 from hot2cold.cli import main
 from hot2cold.kernel.sampling import fe_surface_nodes
-from hot2cold.synthetic import AffineField
+from hot2cold.testing.synthetic import AffineField
 
 FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 
@@ -154,7 +154,7 @@ def test_solid_that_is_not_closed(box):
     from OCP.TopoDS import TopoDS_Solid
 
     from hot2cold.errors import InputError
-    from hot2cold.morph import morph
+    from hot2cold.pipeline.morph import morph
     solid = TopoDS_Solid()
     builder = BRep_Builder()
     builder.MakeSolid(solid)
@@ -270,7 +270,7 @@ def test_duplicate_nodes_with_the_same_displacement_are_merged(tmp_path, box, ou
     points = np.concatenate([nodes, nodes[:10]])
     field = _write_field(tmp_path / "dup.csv", points, FIELD(points))
     report = tmp_path / "r.json"
-    with caplog.at_level("INFO", logger="hot2cold.field"):
+    with caplog.at_level("INFO", logger="hot2cold.io.field"):
         assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
     assert "10 duplicate nodes at the same position as another with the same displacement merged" in caplog.text
     assert json.loads(report.read_text())["nodes_total"] == len(nodes)

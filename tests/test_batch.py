@@ -13,7 +13,7 @@ import pytest
 
 from hot2cold import batch
 from hot2cold.cli import main
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 
 from conftest import SAMPLES

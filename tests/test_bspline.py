@@ -1,4 +1,4 @@
-"""The numpy B-spline evaluators of hot2cold.bspline, checked against the OpenCascade kernel as oracle."""
+"""The numpy B-spline evaluators of hot2cold.core.bspline, checked against the OpenCascade kernel as oracle."""
 from __future__ import annotations
 
 import time
@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse
 from OCP.gp import gp_Pnt, gp_Vec
 
-from hot2cold.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis,
+from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis,
                               evaluate_curve, evaluate_surface, surface_basis, surface_derivative_bases,
                               surface_derivatives, surface_normals)
 from hot2cold.kernel.convert import (curve_to_record, record_to_curve, record_to_surface,

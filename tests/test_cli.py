@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hot2cold.cli import main
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
-from hot2cold.synthetic import AffineField
+from hot2cold.testing.synthetic import AffineField
 
 FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 

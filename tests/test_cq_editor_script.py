@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from cadquery import cqgi
 
-from hot2cold.field import read_field
+from hot2cold.io.field import read_field
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 SCRIPT = SAMPLES / "view_in_cq_editor.py"

@@ -1,4 +1,4 @@
-"""Second derivatives and mean curvature of hot2cold.bspline, checked against the OpenCascade kernel."""
+"""Second derivatives and mean curvature of hot2cold.core.bspline, checked against the OpenCascade kernel."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import pytest
 from OCP.GeomLProp import GeomLProp_SLProps
 from OCP.gp import gp_Pnt, gp_Vec
 
-from hot2cold.bspline import (BSplineSurface, mean_curvature, surface_derivatives, surface_normals,
+from hot2cold.core.bspline import (BSplineSurface, mean_curvature, surface_derivatives, surface_normals,
                               surface_second_derivatives)
 from hot2cold.kernel.convert import record_to_surface
 
@@ -157,7 +157,7 @@ def test_mean_curvature_nan_where_the_normal_is_undefined():
 def test_mean_curvature_on_rotor37_faces_matches_kernel():
     """The real aerofoil surfaces (bicubic, many knots): our H against the kernel's on each face."""
     from hot2cold.kernel.step import read_step
-    from hot2cold.load import load_part
+    from hot2cold.pipeline.load import load_part
     from hot2cold.settings import Settings
 
     part = load_part(read_step(SAMPLES / "rotor37_blade.step"), Settings())

@@ -15,9 +15,9 @@ from scipy.spatial import cKDTree
 
 from hot2cold import export
 from hot2cold.errors import OutputError
-from hot2cold.classify import IGNORED
-from hot2cold.cli import _Progress, main
-from hot2cold.synthetic import AffineField
+from hot2cold.pipeline.classify import IGNORED
+from hot2cold.cli.commands import _Progress, main
+from hot2cold.testing.synthetic import AffineField
 
 BLOCK_FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 
@@ -184,10 +184,10 @@ def test_cli_verbose_logs_each_step(tmp_path, block_step, block_field, capsys):
     assert main(_args(block_step, block_field, tmp_path, "--vtu", tmp_path / "n.vtu", "-v")) == 0
     err = capsys.readouterr().err
     for stage in ("load", "classify", "edges", "faces", "rebuild", "sew", "report"):
-        assert f"INFO hot2cold.morph: {stage} done in" in err
+        assert f"INFO hot2cold.pipeline.morph: {stage} done in" in err
     assert "INFO hot2cold.kernel.step: wrote" in err
     assert "INFO hot2cold.kernel.tessellate: tessellated 18 faces" in err
-    assert f"INFO hot2cold.export: wrote {tmp_path / 'n.vtu'} (4161 nodes) and" in err
+    assert f"INFO hot2cold.io.export: wrote {tmp_path / 'n.vtu'} (4161 nodes) and" in err
     assert "faces: 18/18" in err                                           # and the progress
 
 
@@ -227,7 +227,7 @@ def _refused_before_the_run(capsys, monkeypatch, argv, *words):
     def no_run(*args, **kwargs):
         raise AssertionError("the morph started")
 
-    monkeypatch.setattr(sys.modules["hot2cold.morph"], "morph", no_run)
+    monkeypatch.setattr(sys.modules["hot2cold.pipeline.morph"], "morph", no_run)
     assert main(argv) == 2
     captured = capsys.readouterr()
     lines = captured.err.splitlines()
@@ -273,14 +273,13 @@ def test_cli_bad_outputs_are_refused_before_the_run(tmp_path, block_step, block_
 
 def test_cli_html_without_its_module_is_refused_before_the_run(tmp_path, block_step, block_field, capsys,
                                                                monkeypatch):
-    monkeypatch.setitem(sys.modules, "hot2cold.html_report", None)      # the import fails
+    monkeypatch.setitem(sys.modules, "hot2cold.views.page", None)      # the import fails
     _refused_before_the_run(capsys, monkeypatch, _args(block_step, block_field, tmp_path, "--html",
                                                        tmp_path / "r.html"), "--html", "not available")
     assert list(tmp_path.iterdir()) == []
 
 
 def test_cli_html(tmp_path, block_step, block_field, capsys):
-    pytest.importorskip("hot2cold.html_report", reason="hot2cold.html_report has not landed yet")
     html = tmp_path / "report.html"
     assert main(_args(block_step, block_field, tmp_path, "--html", html, "--scale", "50", "-q")) == 0
     assert capsys.readouterr().err == ""

@@ -21,7 +21,7 @@ from hot2cold.fe import SolverError, TetMesh, mesh_step
 from hot2cold.fe.calculix import (TI6AL4V, Material, blade_temperature, hot_to_cold_field, hub_faces,
                                   read_hot_to_cold, run_ccx, write_deck)
 from hot2cold.fe.frd import read_frd
-from hot2cold.field import read_field
+from hot2cold.io.field import read_field
 from hot2cold.kernel.project import Projector
 from hot2cold.kernel.sampling import face_list
 from hot2cold.kernel.step import read_step

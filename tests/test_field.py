@@ -1,4 +1,4 @@
-"""Tests of hot2cold.field: reading and validating the FE displacement field."""
+"""Tests of hot2cold.io.field: reading and validating the FE displacement field."""
 from __future__ import annotations
 
 import logging
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hot2cold.errors import FieldError, InputError
-from hot2cold.field import UNITS, DisplacementField, as_field, read_field
+from hot2cold.io.field import UNITS, DisplacementField, as_field, read_field
 
 P = np.array([[0.0, 1.0, 2.0], [10.5, -3.25, 7.0], [1e3, 2e-3, -4.5]])
 D = np.array([[0.1, -0.2, 0.3], [1.5e-3, 0.0, -2.0], [-0.05, 0.25, 1e-4]])
@@ -91,7 +91,7 @@ def test_id_column_names(tmp_path, id_name):
 def test_text_node_ids_are_dropped_not_fatal(tmp_path, caplog):
     lines = [f"N{i}," + ln for i, ln in enumerate(rows("x y z dx dy dz".split()))]
     path = write(tmp_path, "id,x,y,z,dx,dy,dz\n" + "\n".join(lines))
-    with caplog.at_level(logging.WARNING, logger="hot2cold.field"):
+    with caplog.at_level(logging.WARNING, logger="hot2cold.io.field"):
         f = read_field(path)
     assert_field(f)
     assert f.node_ids is None
@@ -178,7 +178,7 @@ def test_pathlike_and_str(tmp_path):
 
 def test_logs_node_count(tmp_path, caplog):
     path = write(tmp_path, "x,y,z,dx,dy,dz\n" + "\n".join(rows("x y z dx dy dz".split())))
-    with caplog.at_level(logging.INFO, logger="hot2cold.field"):
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.field"):
         read_field(path)
     assert f"read 3 nodes from {path}" in caplog.text
 
@@ -326,7 +326,7 @@ def test_directory(tmp_path):
 
 
 def test_unreadable_file(tmp_path, monkeypatch):
-    import hot2cold.field as field_module
+    import hot2cold.io.field as field_module
 
     def denied(*args, **kwargs):
         raise PermissionError(13, "Permission denied")

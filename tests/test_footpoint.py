@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from hot2cold.bspline import evaluate_surface, surface_normals
-from hot2cold.classify import FACE, classify_nodes, start_grid
-from hot2cold.domain import INSIDE, OUTSIDE, UNSURE, DomainRaster
-from hot2cold.field import as_field
-from hot2cold.footpoint import project_to_surface
+from hot2cold.core.bspline import evaluate_surface, surface_normals
+from hot2cold.pipeline.classify import FACE, classify_nodes, start_grid
+from hot2cold.core.domain import INSIDE, OUTSIDE, UNSURE, DomainRaster
+from hot2cold.io.field import as_field
+from hot2cold.core.footpoint import project_to_surface
 from hot2cold.kernel.project import OUTSIDE as KERNEL_OUTSIDE
 from hot2cold.kernel.project import Projector
-from hot2cold.load import load_part
+from hot2cold.pipeline.load import load_part
 from hot2cold.settings import Settings
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_parts"

@@ -1,6 +1,6 @@
 """Property-based tests (hypothesis): the field readers on malformed files, and the morph on affine fields.
 
-* Any file given to :func:`hot2cold.field.read_field` (a text table with random headers, missing or extra
+* Any file given to :func:`hot2cold.io.field.read_field` (a text table with random headers, missing or extra
   columns, junk tokens, NaN and inf, truncated lines; binary junk; a broken ``.npz``, ``.frd`` or ``.vtu``)
   gives a valid field or an :class:`~hot2cold.errors.InputError` with a one-line message, never another
   exception.
@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from hot2cold.errors import InputError
-from hot2cold.field import DUPLICATE_DISPLACEMENT_RTOL, DUPLICATE_RTOL, DisplacementField, read_field
+from hot2cold.io.field import DUPLICATE_DISPLACEMENT_RTOL, DUPLICATE_RTOL, DisplacementField, read_field
 
 from conftest import SAMPLES, face_deviation
 
@@ -200,7 +200,7 @@ def test_well_formed_tables_read_exactly(folder, rows, copies, delim, order):
     path.write_text(text)
     field = _read_or_refuse(path)
     # expected: one node per position (the first), its displacement the mean of the group's, refused where they
-    # differ by more than hot2cold.field's tolerance
+    # differ by more than hot2cold.io.field's tolerance
     positions, group = np.unique(values[:, :3], axis=0, return_inverse=True)
     group = group.ravel()
     first = np.sort(np.unique(group, return_index=True)[1])
@@ -248,8 +248,8 @@ UNIT = st.floats(-1.0, 1.0)
        scale=st.tuples(*[st.floats(0.99, 1.01)] * 3), shift=st.tuples(UNIT, UNIT, UNIT),
        where=st.tuples(*[st.floats(0.0, 1.0)] * 3), keep=st.floats(0.3, 1.0), seed=st.integers(0, 2 ** 16))
 def test_random_affine_fields_are_reproduced(name, axis, angle, scale, shift, where, keep, seed):
-    from hot2cold.morph import check_result, morph
-    from hot2cold.synthetic import AffineField, rotation_matrix
+    from hot2cold.pipeline.morph import check_result, morph
+    from hot2cold.testing.synthetic import AffineField, rotation_matrix
 
     assume(np.linalg.norm(axis) > 1e-3)
     shape, nodes = _part(name)

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_surface
-from hot2cold.faces import SIDES
-from hot2cold.g1 import NOT_ISO_SIDE, TangentEdge, correct_g1, kink_angles, tangent_edges
-from hot2cold.model import Edge, EdgeUse, Face, Part
+from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_surface
+from hot2cold.pipeline.face_fit import SIDES
+from hot2cold.pipeline.g1 import NOT_ISO_SIDE, TangentEdge, correct_g1, kink_angles, tangent_edges
+from hot2cold.core.model import Edge, EdgeUse, Face, Part
 
 CUBIC5 = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])              # 5 poles, degree 3
 CUBIC6 = np.array([0, 0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1, 1.0])      # 6 poles, degree 3
@@ -270,7 +270,7 @@ def test_corners_of_tangent_edges_get_one_tangent_plane(blade_part):
     """Turning the cap edges at the blade's corners (as edges fitted one by one do) opens a kink at the
     ends of the span-wise tangent edges; correct_corners closes it by moving only the cap edges' poles next
     to those vertices."""
-    from hot2cold.g1 import correct_corners
+    from hot2cold.pipeline.g1 import correct_corners
     part = blade_part
     found = tangent_edges(part)
     corner_vertices = {v for te in found for v in part.edges[te.edge].vertices}
@@ -300,7 +300,7 @@ def test_corners_of_tangent_edges_get_one_tangent_plane(blade_part):
 
 
 def test_zero_kink_added_moves_no_corner(blade_part):
-    from hot2cold.g1 import correct_corners
+    from hot2cold.pipeline.g1 import correct_corners
     curves = [e.curve for e in blade_part.edges]
     corrected, reports = correct_corners(blade_part, curves, tangent_edges(blade_part))
     assert all(a is b for a, b in zip(corrected, curves))
@@ -308,14 +308,14 @@ def test_zero_kink_added_moves_no_corner(blade_part):
 
 
 def _untwist(nodes, rate, stretch):
-    from hot2cold.synthetic import UntwistField
+    from hot2cold.testing.synthetic import UntwistField
     lo, hi = nodes.min(axis=0), nodes.max(axis=0)
     return UntwistField(axis_point=tuple((lo + hi) / 2), untwist_deg_per_mm=rate, stretch_per_mm2=stretch,
                         z0=float(lo[2]))
 
 
 def _morph_with_and_without_g1(shape, field):
-    from hot2cold.morph import morph
+    from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
     return morph(shape, field, Settings(g1_angle=None)), morph(shape, field)
 

@@ -16,7 +16,7 @@ import pytest
 from matplotlib.image import imread
 
 from hot2cold import html_report, visual
-from hot2cold.bspline import evaluate_surface
+from hot2cold.core.bspline import evaluate_surface
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from hot2cold.errors import FieldError
-from hot2cold.field import DisplacementField
-from hot2cold.invert import invert_field
+from hot2cold.io.field import DisplacementField
+from hot2cold.pipeline.invert import invert_field
 
 
 def test_inverse_of_a_nonlinear_field_round_trips():

@@ -1,12 +1,12 @@
-"""Truncated-SVD least squares (hot2cold.lstsq, paper eq. 19-20)."""
+"""Truncated-SVD least squares (hot2cold.core.lstsq, paper eq. 19-20)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import scipy.sparse
 
-from hot2cold.bspline import BSplineCurve, BSplineSurface, curve_basis, surface_basis
-from hot2cold.lstsq import TsvdSolution, solve_tsvd
+from hot2cold.core.bspline import BSplineCurve, BSplineSurface, curve_basis, surface_basis
+from hot2cold.core.lstsq import TsvdSolution, solve_tsvd
 from hot2cold.settings import FLT_EPSILON
 
 

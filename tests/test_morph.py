@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hot2cold.bspline import evaluate_surface
-from hot2cold.classify import IGNORED
+from hot2cold.core.bspline import evaluate_surface
+from hot2cold.pipeline.classify import IGNORED
 from hot2cold.kernel.convert import surface_to_record
 from hot2cold.kernel.step import read_step
-from hot2cold.morph import morph
-from hot2cold.synthetic import AffineField, UntwistField, ZeroField
+from hot2cold.pipeline.morph import morph
+from hot2cold.testing.synthetic import AffineField, UntwistField, ZeroField
 
 from conftest import face_deviation
 
@@ -89,7 +89,7 @@ def test_offset_and_volume_nodes_change_nothing_beyond_that(blade_shape, blade_n
 
 @pytest.mark.parametrize("part", ["block", "blade"])
 def test_cold_step_reads_back_valid_and_closed(part, request, tmp_path):
-    from hot2cold.kernel.check import check_solids
+    from hot2cold.kernel.validity import check_solids
     shape = request.getfixturevalue(f"{part}_shape")
     nodes = request.getfixturevalue(f"{part}_nodes")
     result = morph(shape, (nodes, THERMAL(nodes)))

@@ -4,11 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hot2cold.artificial import FieldEstimator
-from hot2cold.bspline import BSplineCurve, BSplineSurface, evaluate_curve
-from hot2cold.edges import morph_edge
-from hot2cold.faces import _artificial_parameters, _side_of
-from hot2cold.model import EdgeUse
+from hot2cold.pipeline.artificial import FieldEstimator
+from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_curve
+from hot2cold.pipeline.edge_fit import morph_edge
+from hot2cold.pipeline.face_fit import _artificial_parameters, _side_of
+from hot2cold.core.model import EdgeUse
 
 RNG = np.random.default_rng(11)
 A = np.array([[0.996, 0.01, 0.0], [-0.01, 0.996, 0.002], [0.0, -0.002, 0.996]])

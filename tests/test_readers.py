@@ -13,7 +13,7 @@ import pytest
 
 from hot2cold.errors import FieldError
 from hot2cold.fe.frd import FrdFile, read_frd
-from hot2cold.field import DisplacementField, as_field, read_field
+from hot2cold.io.field import DisplacementField, as_field, read_field
 
 IDS = np.array([1, 2, 3, 10, 11, 12345])
 XYZ = np.array([[0.0, 0.0, 0.0], [40.0, -8.0, 0.5], [-123.456, 7.25, 1e-3],
@@ -181,7 +181,7 @@ def test_frd_recognised_by_content(tmp_path):
 
 def test_frd_logs(tmp_path, caplog):
     path = write(tmp_path, frd_text(disp()))
-    with caplog.at_level(logging.INFO, logger="hot2cold.field"):
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.field"):
         read_field(path)
     assert f"read 6 nodes from {path} (frd, units mm)" in caplog.text
 

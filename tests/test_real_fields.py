@@ -12,9 +12,9 @@ import shutil
 import numpy as np
 import pytest
 
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
-from hot2cold.morph import check_result, morph
+from hot2cold.pipeline.morph import check_result, morph
 
 from conftest import SAMPLES
 

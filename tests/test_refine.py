@@ -14,16 +14,16 @@ from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve, GeomAPI_ProjectPointOnSurf
 from OCP.GProp import GProp_GProps
 from OCP.gp import gp_Pnt
 
-from hot2cold.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, insert_knots,
+from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, insert_knots,
                               surface_normals)
 from hot2cold.cli import main
-from hot2cold.faces import _side_of
-from hot2cold.kernel.check import check_solids
+from hot2cold.pipeline.face_fit import _side_of
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.convert import curve_to_record, record_to_curve, record_to_surface, surface_to_record
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.kernel.step import read_step, write_step
-from hot2cold.morph import check_result, morph
-from hot2cold.refine import edge_distances, elevated_knots, face_distances, refine_curve, refine_surface
+from hot2cold.pipeline.morph import check_result, morph
+from hot2cold.pipeline.refine import edge_distances, elevated_knots, face_distances, refine_curve, refine_surface
 from hot2cold.settings import Settings
 
 from conftest import SAMPLES

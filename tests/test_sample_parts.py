@@ -21,7 +21,7 @@ from OCP.GeomLProp import GeomLProp_SLProps
 from OCP.gp import gp_Dir, gp_Pnt
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX
 
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 from hot2cold.kernel.topology import decompose, shape_map
 

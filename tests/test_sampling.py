@@ -25,7 +25,7 @@ from OCP.TopTools import TopTools_IndexedMapOfShape
 from scipy.spatial import cKDTree
 
 from hot2cold.kernel.sampling import edge_list, face_list, face_samples, fe_surface_nodes, volume_nodes
-from hot2cold.synthetic import AffineField, UntwistField, ZeroField, rotation_matrix
+from hot2cold.testing.synthetic import AffineField, UntwistField, ZeroField, rotation_matrix
 
 PARTS = Path(__file__).resolve().parents[1] / "sample_parts"
 SPACING = 2.0

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from hot2cold.kernel.check import check_solids
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.tessellate import tessellate
 from hot2cold.kernel.topology import shape_map
 

@@ -12,7 +12,7 @@ Shapes:
   coarse 4 mm node set.
 
 The fields are a uniform thermal contraction of 0.3 % about the rotor axis composed with an untwist and a
-span-wise stretch (:class:`~hot2cold.synthetic.UntwistField`): smooth and not affine.  The untwists are chosen
+span-wise stretch (:class:`~hot2cold.testing.synthetic.UntwistField`): smooth and not affine.  The untwists are chosen
 within what the parts' knot vectors can carry: the best least-squares fit of the exact cold surface over a
 face's trimmed domain (same knots) is off by at most 5.9e-4 mm on Rotor 37 (pressure side; twice the untwist
 would put it above 1e-3 mm) and 8.9e-5 mm on the cut blade, so the 1e-3 mm asked for is the morph's error,
@@ -34,15 +34,15 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from hot2cold.bspline import evaluate_surface, surface_derivatives
-from hot2cold.kernel.check import check_solids
+from hot2cold.core.bspline import evaluate_surface, surface_derivatives
+from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.project import OUTSIDE, Projector
 from hot2cold.kernel.sampling import edge_list, face_list, face_samples, fe_surface_nodes
 from hot2cold.kernel.step import read_step
-from hot2cold.load import load_part
-from hot2cold.morph import check_result, morph
+from hot2cold.pipeline.load import load_part
+from hot2cold.pipeline.morph import check_result, morph
 from hot2cold.settings import Settings
-from hot2cold.synthetic import AffineField, UntwistField
+from hot2cold.testing.synthetic import AffineField, UntwistField
 
 from conftest import SAMPLES, face_deviation
 
@@ -253,9 +253,9 @@ HOLE_FACE = 1
 
 def _data_rank(result, k: int) -> int:
     """Rank of face ``k``'s fit over its FE nodes alone (no artificial nodes), poles of tied sides left out."""
-    from hot2cold.bspline import surface_basis
-    from hot2cold.classify import FACE
-    from hot2cold.faces import _row
+    from hot2cold.core.bspline import surface_basis
+    from hot2cold.pipeline.classify import FACE
+    from hot2cold.pipeline.face_fit import _row
     surface, fm = result.part.faces[k].surface, result.faces[k]
     uv = result.classification.uv[result.classification.nodes_of(FACE, k)]
     free = np.ones(surface.shape, bool)

@@ -27,7 +27,7 @@ from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.kernel.step import read_step
 from hot2cold.kernel.topology import decompose
 from hot2cold.kernel.xcaf import read_step_styles
-from hot2cold.synthetic import AffineField
+from hot2cold.testing.synthetic import AffineField
 
 FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FieldError
-from ..field import DisplacementField, match_points
+from ..io.field import DisplacementField, match_points
 from .frd import HOT_TO_COLD_HEADING, FrdFile
 from .mesh import SolverError, TetMesh, mesh_step, step_bounding_box
 

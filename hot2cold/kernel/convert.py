@@ -13,7 +13,7 @@ from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array2OfPnt
 from OCP.TColStd import (TColStd_Array1OfInteger, TColStd_Array1OfReal,
                          TColStd_Array2OfReal)
 
-from ..bspline import BSplineCurve, BSplineSurface
+from ..core.bspline import BSplineCurve, BSplineSurface
 from ..errors import KernelError
 
 

@@ -24,8 +24,8 @@ from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS
 
-from ..domain import UNSURE, DomainRaster
-from ..domain import INSIDE as _RASTER_INSIDE
+from ..core.domain import UNSURE, DomainRaster
+from ..core.domain import INSIDE as _RASTER_INSIDE
 
 #: Position states of :meth:`Projector.classify`.
 INSIDE, ON_BOUNDARY, OUTSIDE = 0, 1, 2

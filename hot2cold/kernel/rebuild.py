@@ -14,7 +14,7 @@ import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.gp import gp_Pnt
 
-from ..bspline import BSplineCurve, BSplineSurface
+from ..core.bspline import BSplineCurve, BSplineSurface
 from ..errors import KernelError
 from .convert import set_curve_poles, set_surface_poles
 from .topology import KernelPart

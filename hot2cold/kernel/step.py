@@ -14,7 +14,7 @@ from OCP.TopAbs import TopAbs_SOLID
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS_Shape
 
-from ..atomic import write_atomically
+from ..io.atomic import write_atomically
 from ..errors import KernelError, StepReadError
 
 log = logging.getLogger(__name__)

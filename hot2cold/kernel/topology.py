@@ -28,7 +28,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from ..errors import KernelError
-from ..model import Edge, EdgeUse, Face, Part
+from ..core.model import Edge, EdgeUse, Face, Part
 from .convert import curve_to_record, surface_to_record
 
 log = logging.getLogger(__name__)

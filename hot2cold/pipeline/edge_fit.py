@@ -14,12 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .artificial import FieldEstimator
-from .bspline import BSplineCurve, curve_basis, evaluate_curve
+from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve
 from .classify import EDGE, VERTEX, Classification
-from .field import DisplacementField
-from .lstsq import solve_tsvd
-from .model import Part
-from .settings import Settings
+from ..io.field import DisplacementField
+from ..core.lstsq import solve_tsvd
+from ..core.model import Part
+from ..settings import Settings
 
 log = logging.getLogger(__name__)
 

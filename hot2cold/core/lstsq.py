@@ -25,7 +25,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse
 
-from .settings import FLT_EPSILON
+from ..settings import FLT_EPSILON
 
 log = logging.getLogger(__name__)
 

@@ -109,7 +109,7 @@ def self_intersections(shape, touch: float) -> list[Intersection]:
     (``BOPAlgo_ArgumentAnalyzer``'s self-interference test).
 
     The analyzer counts sub-shapes whose tolerance zones overlap; a morph widens edge tolerances to the true
-    edge-face gaps (:mod:`.sew`), and two such edges near each other are no intersection.  So a pair that
+    edge-face gaps (:mod:`.tolerances`), and two such edges near each other are no intersection.  So a pair that
     shares no vertex counts only if it is less than ``touch`` (mm) apart (``BRepExtrema_DistShapeShape``);
     a pair that shares a vertex always counts (adjacent faces crossing beyond their common edge).
     """

@@ -6,7 +6,7 @@ import uuid
 from pathlib import Path
 from typing import Callable
 
-from .errors import OutputError
+from ..errors import OutputError
 
 
 def write_atomically(jobs: list[tuple[Path, Callable[[str], object]]]) -> None:

@@ -1,4 +1,4 @@
-"""Sewing the cold part: making its shared edges and vertices consistent with the morphed faces.
+"""Fitting the cold part's edge and vertex tolerances to the true gaps left by the morph (no sewing).
 
 The morph keeps the hot topology (see :mod:`hot2cold.kernel.rebuild`), so faces are never separated and
 there is nothing to re-match as ``BRepBuilderAPI_Sewing`` would on a loose set of faces.  What the morph
@@ -36,7 +36,7 @@ def _gap(edge, face, n: int) -> float:
     return gap
 
 
-def sew(kernel: KernelPart, samples: int = 51, margin: float = 1.5) -> np.ndarray:
+def fit_tolerances(kernel: KernelPart, samples: int = 51, margin: float = 1.5) -> np.ndarray:
     """Fit edge and vertex tolerances of ``kernel.work`` to the morphed geometry.
 
     Returns the gap ``(n_edges,)`` in mm of every edge: the largest distance, over ``samples`` points, between

@@ -5,13 +5,13 @@ import logging
 import os
 from dataclasses import replace
 
-from .errors import KernelError
-from .kernel.shapes import as_topods
-from .kernel.step import read_step
-from .kernel.topology import decompose
-from .kernel.xcaf import read_step_styles
-from .model import Part
-from .settings import Settings
+from ..errors import KernelError
+from ..kernel.shapes import as_topods
+from ..kernel.step import read_step
+from ..kernel.topology import decompose
+from ..kernel.xcaf import read_step_styles
+from ..core.model import Part
+from ..settings import Settings
 
 log = logging.getLogger(__name__)
 

@@ -32,10 +32,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .bspline import BSplineCurve, BSplineSurface, surface_derivative_bases, surface_normals
-from .faces import SIDES, _side_of
-from .lstsq import solve_tsvd
-from .model import EdgeUse, Face, Part
+from ..core.bspline import BSplineCurve, BSplineSurface, surface_derivative_bases, surface_normals
+from .face_fit import SIDES, _side_of
+from ..core.lstsq import solve_tsvd
+from ..core.model import EdgeUse, Face, Part
 
 log = logging.getLogger(__name__)
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bspline import evaluate_surface
+from ..core.bspline import evaluate_surface
 from .atomic import write_atomically
 
 log = logging.getLogger(__name__)
@@ -64,7 +64,7 @@ def cold_surface(result, deflection: float | None = None) -> ColdSurface:
     ``deflection``: largest distance (mm) between a triangle and its face (default 1e-3 of the part's
     bounding-box diagonal).
     """
-    from .kernel.tessellate import tessellate
+    from ..kernel.tessellate import tessellate
 
     mesh = tessellate(result.cold.wrapped, deflection)
     vertex_face = np.full(len(mesh.vertices), -1)

@@ -35,13 +35,13 @@ from typing import Callable
 
 import numpy as np
 
-from .bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis, evaluate_curve,
+from ..core.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis, evaluate_curve,
                       evaluate_surface, surface_derivatives)
 from .classify import EDGE, FACE, Classification
-from .edges import EdgeMorph
-from .faces import SIDES, FaceMorph, _side_of
-from .field import DisplacementField
-from .model import Edge, Face, Part
+from .edge_fit import EdgeMorph
+from .face_fit import SIDES, FaceMorph, _side_of
+from ..io.field import DisplacementField
+from ..core.model import Edge, Face, Part
 
 log = logging.getLogger(__name__)
 

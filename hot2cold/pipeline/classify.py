@@ -21,12 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .bspline import evaluate_curve, evaluate_surface, surface_normals
-from .field import DisplacementField
-from .footpoint import project_to_surface
-from .kernel.project import OUTSIDE, Projector
-from .model import Part
-from .settings import Settings
+from ..core.bspline import evaluate_curve, evaluate_surface, surface_normals
+from ..io.field import DisplacementField
+from ..core.footpoint import project_to_surface
+from ..kernel.project import OUTSIDE, Projector
+from ..core.model import Part
+from ..settings import Settings
 
 log = logging.getLogger(__name__)
 

@@ -29,9 +29,9 @@ import sys
 import time
 from pathlib import Path
 
-from . import __version__
-from .errors import Hot2ColdError, InputError, OutputError, StepReadError
-from .field import UNITS
+from .. import __version__
+from ..errors import Hot2ColdError, InputError, OutputError, StepReadError
+from ..io.field import UNITS
 
 log = logging.getLogger("hot2cold")
 
@@ -174,7 +174,7 @@ def _check_output(inputs, output: Path, what: str) -> None:
 
 def _outputs(args) -> list[tuple[str, Path]]:
     """Every file the run will write, as (what, path)."""
-    from .export import surface_path
+    from ..io.export import surface_path
 
     out = [("output", args.output)]
     if args.report:
@@ -204,9 +204,9 @@ def _check_options(args) -> None:
 
 
 def _html_writer():
-    """``write_html`` of :mod:`hot2cold.html_report`, or an :class:`InputError` if it cannot be imported."""
+    """``write_html`` of :mod:`hot2cold.views.page`, or an :class:`InputError` if it cannot be imported."""
     try:
-        from .html_report import write_html
+        from ..views.page import write_html
     except ImportError as exc:
         raise InputError(f"--html is not available in this installation: {exc}") from exc
     return write_html
@@ -214,7 +214,7 @@ def _html_writer():
 
 def _write_exports(args, result):
     """Write the viewer exports asked for, yielding each path as soon as it is written."""
-    from . import export
+    from ..io import export
 
     surface = None
     if args.vtu or args.stl or args.glb:
@@ -233,7 +233,7 @@ def _write_exports(args, result):
 
 def _morph(args) -> int:
     from .batch import settings_for, tolerance_missed, write_cold
-    from .morph import morph
+    from ..pipeline.morph import morph
 
     _check_input(args.hot, "STEP file")
     _check_input(args.field, "field file")
@@ -274,7 +274,7 @@ def _no_solid(path: Path, exc: StepReadError) -> StepReadError:
     """``exc``, or where the STEP file holds shells or faces but no solid, an error that says what it holds."""
     if "no solid" not in str(exc):     # read_step's words for a file it read that holds no solid
         return exc
-    from .kernel.check import step_content
+    from ..kernel.validity import step_content
 
     content = step_content(path)
     if content is None:

@@ -28,8 +28,8 @@ import numpy as np
 
 from scipy.spatial import cKDTree
 
-from .errors import FieldError
-from .field import DisplacementField
+from ..errors import FieldError
+from ..io.field import DisplacementField
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@
 The page holds the paper-style table per face and per edge (FE nodes, control points, Δmax, Δmean; the
 kink before and after the G1 correction on tangent edges), the overall checks (validity, free edges,
 volumes hot and cold, nodes used and ignored), the tolerance and refinements, and the pictures of
-:mod:`hot2cold.visual`.  It loads nothing from anywhere: no scripts, no style sheets, no image files.
+:mod:`hot2cold.views.pictures`.  It loads nothing from anywhere: no scripts, no style sheets, no image files.
 """
 from __future__ import annotations
 
@@ -18,9 +18,9 @@ import os
 import time
 from pathlib import Path
 
-from . import __version__
-from . import visual
-from .atomic import write_atomically
+from .. import __version__
+from . import pictures
+from ..io.atomic import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -185,17 +185,17 @@ def render_html(result, scale: float | None = None) -> str:
     """The report page of ``result`` (a :class:`~hot2cold.morph.MorphResult`) as a string.
 
     ``scale`` exaggerates the displacement in the overlay picture (default
-    :func:`hot2cold.visual.displacement_scale`: the largest displacement drawn as 5 % of the part's size).
+    :func:`hot2cold.pictures.displacement_scale`: the largest displacement drawn as 5 % of the part's size).
     """
     report = result.report
-    scale = visual.displacement_scale(result) if scale is None else visual.check_scale(scale)
+    scale = pictures.displacement_scale(result) if scale is None else pictures.check_scale(scale)
     clock = time.perf_counter()
-    mesh = visual.mesh_of(result)
-    overlay = visual.overlay_png(result, scale, mesh=mesh)
-    error_faces = visual.error_faces(result)
-    errors = visual.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
-    curv_faces = visual.curvature_faces(result, mesh=mesh)
-    curvature = visual.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
+    mesh = pictures.mesh_of(result)
+    overlay = pictures.overlay_png(result, scale, mesh=mesh)
+    error_faces = pictures.error_faces(result)
+    errors = pictures.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
+    curv_faces = pictures.curvature_faces(result, mesh=mesh)
+    curvature = pictures.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
     log.info("pictures drawn in %.2f s", time.perf_counter() - clock)
 
     largest = report.max_displacement

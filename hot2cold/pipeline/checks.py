@@ -15,15 +15,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
+from ..core.bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
 from .classify import FACE, Classification
-from .errors import FieldError, InputError, MorphError
-from .faces import FaceMorph
-from .field import DisplacementField
-from .kernel.check import SolidCheck, face_areas, self_intersections
-from .kernel.project import OUTSIDE, Projector
-from .model import Part
-from .settings import Settings
+from ..errors import FieldError, InputError, MorphError
+from .face_fit import FaceMorph
+from ..io.field import DisplacementField
+from ..kernel.validity import SolidCheck, face_areas, self_intersections
+from ..kernel.project import OUTSIDE, Projector
+from ..core.model import Part
+from ..settings import Settings
 
 if TYPE_CHECKING:
     from .morph import MorphResult

@@ -23,13 +23,13 @@ from typing import Callable
 import numpy as np
 
 from .artificial import FieldEstimator
-from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
+from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
 from .classify import FACE, Classification
-from .edges import EdgeMorph
-from .field import DisplacementField
-from .lstsq import solve_tsvd
-from .model import EdgeUse, Face, Part
-from .settings import Settings
+from .edge_fit import EdgeMorph
+from ..io.field import DisplacementField
+from ..core.lstsq import solve_tsvd
+from ..core.model import EdgeUse, Face, Part
+from ..settings import Settings
 
 log = logging.getLogger(__name__)
 

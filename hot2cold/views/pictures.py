@@ -29,9 +29,9 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter
 
-from .bspline import BSplineSurface, evaluate_curve, evaluate_surface, mean_curvature, surface_derivatives
-from .classify import EDGE, FACE
-from .kernel.tessellate import TriangleMesh, tessellate
+from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, mean_curvature, surface_derivatives
+from ..pipeline.classify import EDGE, FACE
+from ..kernel.tessellate import TriangleMesh, tessellate
 
 log = logging.getLogger(__name__)
 

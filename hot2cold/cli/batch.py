@@ -33,12 +33,12 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Callable, Iterator
 
-from . import __version__
-from .atomic import write_atomically
-from .errors import Hot2ColdError, InputError
-from .field import UNITS
-from .morph import check_result, morph
-from .settings import Settings
+from .. import __version__
+from ..io.atomic import write_atomically
+from ..errors import Hot2ColdError, InputError
+from ..io.field import UNITS
+from ..pipeline.morph import check_result, morph
+from ..settings import Settings
 
 log = logging.getLogger(__name__)
 

@@ -13,13 +13,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .classify import EDGE, FACE, IGNORED, VERTEX, Classification
-from .edges import EdgeMorph
-from .faces import FaceMorph
-from .field import DisplacementField
-from .footpoint import project_to_surface
-from .kernel.check import SolidCheck
-from .kernel.project import Projector
-from .model import Part
+from .edge_fit import EdgeMorph
+from .face_fit import FaceMorph
+from ..io.field import DisplacementField
+from ..core.footpoint import project_to_surface
+from ..kernel.validity import SolidCheck
+from ..kernel.project import Projector
+from ..core.model import Part
 
 
 @dataclass(frozen=True)
