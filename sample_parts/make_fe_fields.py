@@ -54,7 +54,8 @@ def main() -> int:
         start = time.perf_counter()
         field = hot_to_cold_field(HERE / f"{name}.step", HERE / f"{name}_field.npz", **options)
         size = (HERE / f"{name}_field.npz").stat().st_size / 1e6
-        print(f"{name}: {len(field)} surface nodes, max |d| {np.linalg.norm(field.displacements, axis=1).max():.4f} mm, "
+        largest = np.linalg.norm(field.displacements, axis=1).max()
+        print(f"{name}: {len(field)} surface nodes, max |d| {largest:.4f} mm, "
               f"{time.perf_counter() - start:.1f} s, {size:.2f} MB")
     return 0
 

@@ -33,11 +33,9 @@ import os
 from pathlib import Path
 
 import cadquery as cq
-import numpy as np
 
 import hot2cold
-from hot2cold.io.field import read_field
-from hot2cold.pipeline.morph import morph
+from hot2cold import morph, read_field
 
 exaggerate = 1.0
 show_nodes = True

@@ -26,6 +26,8 @@ from hot2cold.io.field import DUPLICATE_DISPLACEMENT_RTOL, DUPLICATE_RTOL, Displ
 
 from conftest import SAMPLES, face_deviation
 
+pytestmark = pytest.mark.slow
+
 FUZZ = settings(deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 

@@ -1,9 +1,13 @@
-"""Accepting the user's shapes (path, CadQuery object or raw ``TopoDS_Shape``) and handing back CadQuery ones."""
+"""Accepting the user's shapes (path, CadQuery object or raw ``TopoDS_Shape``) and handing back CadQuery ones.
+
+CadQuery (1.4 s to import, with VTK) is imported only when a CadQuery shape is asked for: a shape the user
+passes in is one only if CadQuery is loaded already.
+"""
 from __future__ import annotations
 
 import os
+import sys
 
-import cadquery as cq
 from OCP.TopoDS import TopoDS_Shape
 
 from ..errors import InputError
@@ -17,15 +21,19 @@ def as_topods(hot) -> TopoDS_Shape:
         return read_step(hot)
     if isinstance(hot, TopoDS_Shape):
         return hot
-    if isinstance(hot, cq.Shape):
-        return hot.wrapped
-    if isinstance(hot, cq.Workplane):
-        return cq.Compound.makeCompound([o for o in hot.vals() if isinstance(o, cq.Shape)]).wrapped
-    if isinstance(hot, cq.Assembly):
-        return hot.toCompound().wrapped
+    cq = sys.modules.get("cadquery")     # not loaded: ``hot`` cannot be one of its objects
+    if cq is not None:
+        if isinstance(hot, cq.Shape):
+            return hot.wrapped
+        if isinstance(hot, cq.Workplane):
+            return cq.Compound.makeCompound([o for o in hot.vals() if isinstance(o, cq.Shape)]).wrapped
+        if isinstance(hot, cq.Assembly):
+            return hot.toCompound().wrapped
     raise InputError(f"cannot morph a {type(hot).__name__}: give a STEP path or a CadQuery shape")
 
 
-def to_cadquery(shape: TopoDS_Shape) -> cq.Shape:
+def to_cadquery(shape: TopoDS_Shape):
     """``shape`` as the matching ``cadquery.Shape`` subclass (Solid, Compound, ...)."""
+    import cadquery as cq
+
     return cq.Shape.cast(shape)

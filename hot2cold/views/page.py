@@ -216,7 +216,8 @@ def render_html(result, scale: float | None = None) -> str:
     if curvature is not None:
         figures.append(
             f'<figure>{_img(curvature, "mean curvature hot and cold")}<figcaption>Figure 3. Mean curvature '
-            f"H (1/mm) of the hot and the morphed surface of the largest faces ({_e(', '.join(map(str, curv_faces)))}), "
+            f"H (1/mm) of the hot and the morphed surface of the largest faces "
+            f"({_e(', '.join(map(str, curv_faces)))}), "
             f"as in the paper's Fig. 9 and 11, and their difference; hot and cold share one colour scale "
             f"(1–99 % of the values). A smooth difference means the morph added no wiggles."
             f"</figcaption></figure>")
