@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hot2cold import cli
+from hot2cold.cli import commands
 from hot2cold.cli import main
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.testing.synthetic import AffineField
@@ -98,7 +98,7 @@ def test_step_unreadable(tmp_path, box, out, capsys, monkeypatch):
     hot.chmod(0)
     real = os.access
     # (root may read any file: the permission test itself is what is simulated)
-    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+    monkeypatch.setattr(commands.os, "access", lambda p, mode, *a, **k:
                         False if mode == os.R_OK and Path(p) == hot else real(p, mode, *a, **k))
     _refused(capsys, _morph(hot, box[2], out), 2,
              r"cannot read STEP file .*locked\.step: permission denied; check its permissions$", out)
@@ -202,7 +202,7 @@ def test_field_unreadable(tmp_path, box, out, capsys, monkeypatch):
     field = tmp_path / "locked.csv"
     field.write_bytes(box[2].read_bytes())
     real = os.access
-    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+    monkeypatch.setattr(commands.os, "access", lambda p, mode, *a, **k:
                         False if mode == os.R_OK and Path(p) == field else real(p, mode, *a, **k))
     _refused(capsys, _morph(box[0], field, out), 2,
              r"cannot read field file .*locked\.csv: permission denied; check its permissions$", out)
@@ -343,8 +343,8 @@ def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
     assert len(warnings) == 1 and "Traceback" not in err
-    assert re.match(r"WARNING hot2cold\.checks: .*partial\.csv covers only part of the solid: 1 of its 6 faces gets no "
-                    r"FE node .*; they are morphed from the field of the other faces, extrapolated \(--extrapolate\)$",
+    assert re.match(r"WARNING hot2cold\.pipeline\.checks: .*partial\.csv covers only part of the solid: 1 of its 6 "
+                    r"faces gets no FE node .*; they are morphed from the field of the other faces, extrapolated \(--extrapolate\)$",
                     warnings[0])
     data = json.loads(report.read_text())
     assert out.exists() and data["valid"] and data["delta_max"] < 1e-9
@@ -380,8 +380,8 @@ def test_displacements_that_fold_a_face(tmp_path, out, capsys):
     field = _write_field(tmp_path / "fold.csv", nodes,
                          np.column_stack([squeeze * nodes[:, 0], squeeze * nodes[:, 1], 0 * squeeze]))
     _refused(capsys, _morph(hot, field, out), 4,
-             r"cold solid 0 folds: face \d+ turns over at \d+ of \d+ points, e\.g\. near \(.*\) mm, the field moving it "
-             r"by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large for this part "
+             r"cold solid 0 folds: face \d+ turns over at \d+ of \d+ points, e\.g\. near \(.*\) mm, the "
+             r"field moving it by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large for this part "
              r"\(check the field's units and scale, and that it belongs to this part\); not written$", out)
 
 
@@ -431,7 +431,7 @@ def test_output_folder_missing(tmp_path, box, capsys):
 
 def test_output_folder_not_writable(box, out, capsys, monkeypatch):
     real = os.access
-    monkeypatch.setattr(cli.os, "access", lambda p, mode, *a, **k:
+    monkeypatch.setattr(commands.os, "access", lambda p, mode, *a, **k:
                         False if mode == os.W_OK and Path(p) == out.parent else real(p, mode, *a, **k))
     _refused(capsys, _morph(box[0], box[2], out), 2,
              r"folder for output .*cold\.step is not writable: choose another folder or fix its permissions$", out)

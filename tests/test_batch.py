@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import pytest
 
-from hot2cold import batch
+from hot2cold.cli import batch
 from hot2cold.cli import main
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
