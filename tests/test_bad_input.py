@@ -344,7 +344,8 @@ def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
     assert len(warnings) == 1 and "Traceback" not in err
     assert re.match(r"WARNING hot2cold\.pipeline\.checks: .*partial\.csv covers only part of the solid: 1 of its 6 "
-                    r"faces gets no FE node .*; they are morphed from the field of the other faces, extrapolated \(--extrapolate\)$",
+                    r"faces gets no FE node .*; they are morphed from the field of the other faces, extrapolated "
+                    r"\(--extrapolate\)$",
                     warnings[0])
     data = json.loads(report.read_text())
     assert out.exists() and data["valid"] and data["delta_max"] < 1e-9
@@ -381,7 +382,8 @@ def test_displacements_that_fold_a_face(tmp_path, out, capsys):
                          np.column_stack([squeeze * nodes[:, 0], squeeze * nodes[:, 1], 0 * squeeze]))
     _refused(capsys, _morph(hot, field, out), 4,
              r"cold solid 0 folds: face \d+ turns over at \d+ of \d+ points, e\.g\. near \(.*\) mm, the "
-             r"field moving it by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large for this part "
+             r"field moving it by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large "
+             r"for this part "
              r"\(check the field's units and scale, and that it belongs to this part\); not written$", out)
 
 
