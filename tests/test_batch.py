@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import pytest
 
-from hot2cold import batch
+from hot2cold.cli import batch
 from hot2cold.cli import main
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
@@ -213,15 +213,17 @@ def test_csv_and_toml_give_the_same_jobs(project):
     assert set(batch._CONVERT) == set(batch.OPTIONS)        # every option of a Job is read
     job = csv_jobs[0]
     assert job.hot == project / "hot.step" and job.report == project / "cold" / "a.json"
-    assert (job.field_units, job.invert, job.tolerance, job.max_refinements) == ("m", True, 1e-3, 2)
-    assert job.settings().tolerance == 1e-3
-    assert not job.settings().extrapolate
+    assert (job.options.field_units, job.options.invert, job.options.tolerance, job.options.max_refinements) == \
+        ("m", True, 1e-3, 2)
+    assert job.options.to_settings().tolerance == 1e-3
+    assert not job.options.to_settings().extrapolate
 
 
 def test_extrapolate_reaches_the_settings_of_a_job(project):
     (job,) = batch.read_jobs(_jobs_csv(project, ["x,hot.step,op0.csv,cold/x.step,true"],
                                        "name,hot,field,output,extrapolate"))
-    assert job.extrapolate and job.settings().extrapolate and job.options()["extrapolate"] is True
+    assert job.options.extrapolate and job.options.to_settings().extrapolate and \
+        job.options.as_dict()["extrapolate"] is True
 
 
 def test_stale_or_half_written_output_is_not_skipped(project):
@@ -244,7 +246,7 @@ def test_stale_or_half_written_output_is_not_skipped(project):
     job.field.write_bytes(field)
     assert batch.done_before(job) is not None
 
-    assert batch.done_before(replace(job, tolerance=1e-3)) is None    # other options
+    assert batch.done_before(replace(job, options=replace(job.options, tolerance=1e-3))) is None  # other options
     job.report.unlink()                                            # an output missing
     assert batch.done_before(job) is None
 
@@ -274,7 +276,7 @@ def test_a_worker_that_dies_fails_its_job_only(project):
 
 def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
     (job,) = batch.read_jobs(_jobs_csv(project, ["t,hot.step,op0.csv,cold/t.step,"]))
-    job = replace(job, tolerance=1e-9, max_refinements=0)
+    job = replace(job, options=replace(job.options, tolerance=1e-9, max_refinements=0))
     result = batch.run_job(job)
     assert result["status"] == "tolerance-missed" and result["exit_code"] == 5
     assert "not met" in result["message"] and result["delta_max"] > 1e-9
