@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hot2cold import cli
+from hot2cold.cli import commands as cli
 from hot2cold.cli import main
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.testing.synthetic import AffineField

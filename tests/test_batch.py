@@ -5,14 +5,15 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
 import sys
 import time
 from dataclasses import replace
 
 import pytest
 
-from hot2cold.cli import batch
-from hot2cold.cli import main
+from hot2cold.cli import batch, main
+from hot2cold.cli.workers import ONE_THREAD
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 
@@ -288,3 +289,36 @@ def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
     assert batch.exit_code([result, {"status": "failed"}]) == 1
     assert batch.exit_code([{"status": "skipped"}, {"status": "ok"}]) == 0
     assert batch.exit_code([result, {"status": "not-run"}]) == 130
+
+
+def _threads_of_the_worker(job):
+    """A runner that reports the worker's thread settings instead of morphing (numpy loaded by then, as a
+    job's imports load it)."""
+    import numpy  # noqa: F401
+    from threadpoolctl import threadpool_info
+
+    blas = sorted({lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+    return batch._result(job, "ok", 0, environment={k: os.environ.get(k) for k in ONE_THREAD}, blas=blas)
+
+
+def test_pool_workers_run_at_one_thread_and_this_environment_is_left_alone(project, monkeypatch):
+    for key in ONE_THREAD:
+        monkeypatch.delenv(key, raising=False)
+    before = dict(os.environ)
+    jobs = batch.read_jobs(_jobs_csv(project, [f"{n},hot.step,op0.csv,cold/{n}.step," for n in "xy"]))
+    running = batch.run_jobs(jobs, workers=1, runner=_threads_of_the_worker)
+    results = [next(running)]
+    assert dict(os.environ) == before           # while the pool runs
+    results += list(running)
+    assert dict(os.environ) == before
+    assert [r["status"] for r in results] == ["ok", "ok"]
+    for r in results:
+        assert r["environment"] == ONE_THREAD and r["blas"] == [1]
+
+
+def test_the_worker_initializer_imports_no_numpy():
+    """A spawn worker imports hot2cold.cli.workers (and hot2cold.cli) for its initializer before its first
+    job: numpy must not be loaded by then, or it would start its threads before they are set to one."""
+    code = "import sys, hot2cold.cli.workers; print(sorted({'numpy', 'hot2cold.cli.commands'} & set(sys.modules)))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "[]"

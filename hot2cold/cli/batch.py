@@ -9,10 +9,10 @@ may be written with ``-`` or ``_``.
 
 :func:`read_jobs` checks the whole file before anything runs; :func:`run_jobs` runs the jobs in a local
 process pool or on a Dask cluster and yields one result dict per job (:func:`run_job` is what a worker
-runs: :func:`~hot2cold.cli.run.run_morph` and the writing of :mod:`hot2cold.cli.run`, as
-``hot2cold morph``).  A job whose cold STEP exists with a record beside it (``<output>.hot2cold.json``, written after
-the STEP) stating the same inputs (SHA-256 of the hot STEP and the field, the options, the hot2cold
-version) and the same outputs (size and SHA-256 of the STEP and the report) is skipped.
+runs: the morph, report, check and cold STEP of :mod:`hot2cold.cli.run`, as ``hot2cold morph``).  A job
+whose cold STEP exists with a record beside it (``<output>.hot2cold.json``, written after the STEP) stating
+the same inputs (SHA-256 of the hot STEP and the field, the options, the hot2cold version) and the same
+outputs (size and SHA-256 of the STEP and the report) is skipped.
 
 Library code: nothing here prints; it logs and raises :class:`~hot2cold.errors.Hot2ColdError`.
 """
@@ -29,7 +29,7 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -63,7 +63,7 @@ class Job:
     field: Path
     output: Path
     report: Path | None = None
-    options: MorphOptions = field(default_factory=MorphOptions)
+    options: MorphOptions = MorphOptions()
 
     @property
     def record(self) -> Path:
@@ -197,9 +197,9 @@ def _job(where: str, row: dict, folder: Path) -> Job:
             if key not in values:
                 raise ValueError(f"no {key} given")
         options = MorphOptions(**{k: v for k, v in values.items() if k not in JOB_KEYS})
-        options.to_settings()
-        job = Job(**{"name": str(row["output"]).strip(), **{k: v for k, v in values.items() if k in JOB_KEYS}},
-                  options=options)
+        options.to_settings()           # a bad value is refused here, with the file's line
+        own = {k: v for k, v in values.items() if k in JOB_KEYS}
+        job = Job(**{"name": str(row["output"]).strip(), **own}, options=options)
     except (ValueError, TypeError) as exc:  # InputError is a ValueError
         raise InputError(f"{where}: {exc}") from None
     return job
