@@ -99,41 +99,44 @@ class Option:
     choices: tuple[str, ...] | None = None
 
 
-def _option(default, flag: str, help: str, convert: Callable, **more):
+def _option(default, *, flag: str, convert: Callable, help: str, **more):
     """A field of :class:`MorphOptions`: its default and its :class:`Option` as metadata."""
-    return field(default=default, metadata={"option": Option(flag, help, convert, **more)})
+    return field(default=default, metadata={"option": Option(flag=flag, help=help, convert=convert, **more)})
 
 
 @dataclass(frozen=True)
 class MorphOptions:
     """The options of one morph, as ``hot2cold morph`` and a batch job take them (None: the default of
-    :class:`~hot2cold.settings.Settings`).  Lengths in mm."""
+    :class:`~hot2cold.settings.Settings`).  Lengths in mm.  The fields' order is the order of ``--help``,
+    of the jobs-file messages and of a batch record's ``options``."""
 
     field_units: str = _option(
-        "mm", "--field-units", "length unit of the field file (default mm)", to_units, type=str,
-        choices=tuple(sorted(UNITS)))
+        "mm", flag="--field-units", convert=to_units, type=str, choices=tuple(sorted(UNITS)),
+        help="length unit of the field file (default mm)")
     field_name: str | None = _option(
-        None, "--field-name", "displacement point field in a VTK/VTU file (default: U, displacement or DISP)",
-        to_text, type=str, metavar="NAME")
+        None, flag="--field-name", convert=to_text, type=str, metavar="NAME",
+        help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
     invert: bool = _option(
-        False, "--invert", "the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point "
-        "iteration", to_flag)
+        False, flag="--invert", convert=to_flag,
+        help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
     tolerance: float | None = _option(
-        None, "--tolerance", "largest accepted error (Δmax of every face and edge): where it is missed, faces "
-        "and edges are refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted "
-        "again; exit code 5 when it still is not met", to_number, type=float, metavar="MM")
+        None, flag="--tolerance", convert=to_number, type=float, metavar="MM",
+        help="largest accepted error (Δmax of every face and edge): where it is missed, faces and edges are "
+        "refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted again; exit code 5 "
+        "when it still is not met")
     max_refinements: int | None = _option(
-        None, "--max-refinements", "rounds of refinement for --tolerance at the most (default 4)", to_count,
-        type=int, metavar="N")
+        None, flag="--max-refinements", convert=to_count, type=int, metavar="N",
+        help="rounds of refinement for --tolerance at the most (default 4)")
     node_distance: float | None = _option(
-        None, "--node-distance", "nodes farther than this from every face are ignored (default 0.1%% of the "
-        "part size)", to_number, type=float, metavar="MM")
+        None, flag="--node-distance", convert=to_number, type=float, metavar="MM",
+        help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     edge_distance: float | None = _option(
-        None, "--edge-distance", "nodes this close to an edge feed the edge (default 0.01%% of the part size)",
-        to_number, type=float, metavar="MM")
+        None, flag="--edge-distance", convert=to_number, type=float, metavar="MM",
+        help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
     extrapolate: bool = _option(
-        False, "--extrapolate", "morph faces that get no FE node from the field of the other faces, "
-        "extrapolated (with a warning); without it such a field is refused", to_flag)
+        False, flag="--extrapolate", convert=to_flag,
+        help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
+        "warning); without it such a field is refused")
 
     @staticmethod
     def names() -> tuple[str, ...]:
