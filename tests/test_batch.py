@@ -5,18 +5,21 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
 import sys
 import time
 from dataclasses import replace
 
 import pytest
 
-from hot2cold.cli import batch
-from hot2cold.cli import main
+from hot2cold.cli import batch, main
+from hot2cold.cli.workers import ONE_THREAD
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 
 from conftest import SAMPLES
+
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
@@ -213,15 +216,17 @@ def test_csv_and_toml_give_the_same_jobs(project):
     assert set(batch._CONVERT) == set(batch.OPTIONS)        # every option of a Job is read
     job = csv_jobs[0]
     assert job.hot == project / "hot.step" and job.report == project / "cold" / "a.json"
-    assert (job.field_units, job.invert, job.tolerance, job.max_refinements) == ("m", True, 1e-3, 2)
-    assert job.settings().tolerance == 1e-3
-    assert not job.settings().extrapolate
+    assert (job.options.field_units, job.options.invert, job.options.tolerance, job.options.max_refinements) == \
+        ("m", True, 1e-3, 2)
+    assert job.options.to_settings().tolerance == 1e-3
+    assert not job.options.to_settings().extrapolate
 
 
 def test_extrapolate_reaches_the_settings_of_a_job(project):
     (job,) = batch.read_jobs(_jobs_csv(project, ["x,hot.step,op0.csv,cold/x.step,true"],
                                        "name,hot,field,output,extrapolate"))
-    assert job.extrapolate and job.settings().extrapolate and job.options()["extrapolate"] is True
+    assert job.options.extrapolate and job.options.to_settings().extrapolate and \
+        job.options.as_dict()["extrapolate"] is True
 
 
 def test_stale_or_half_written_output_is_not_skipped(project):
@@ -244,7 +249,7 @@ def test_stale_or_half_written_output_is_not_skipped(project):
     job.field.write_bytes(field)
     assert batch.done_before(job) is not None
 
-    assert batch.done_before(replace(job, tolerance=1e-3)) is None    # other options
+    assert batch.done_before(replace(job, options=replace(job.options, tolerance=1e-3))) is None  # other options
     job.report.unlink()                                            # an output missing
     assert batch.done_before(job) is None
 
@@ -274,7 +279,7 @@ def test_a_worker_that_dies_fails_its_job_only(project):
 
 def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
     (job,) = batch.read_jobs(_jobs_csv(project, ["t,hot.step,op0.csv,cold/t.step,"]))
-    job = replace(job, tolerance=1e-9, max_refinements=0)
+    job = replace(job, options=replace(job.options, tolerance=1e-9, max_refinements=0))
     result = batch.run_job(job)
     assert result["status"] == "tolerance-missed" and result["exit_code"] == 5
     assert "not met" in result["message"] and result["delta_max"] > 1e-9
@@ -286,3 +291,36 @@ def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
     assert batch.exit_code([result, {"status": "failed"}]) == 1
     assert batch.exit_code([{"status": "skipped"}, {"status": "ok"}]) == 0
     assert batch.exit_code([result, {"status": "not-run"}]) == 130
+
+
+def _threads_of_the_worker(job):
+    """A runner that reports the worker's thread settings instead of morphing (numpy loaded by then, as a
+    job's imports load it)."""
+    import numpy  # noqa: F401
+    from threadpoolctl import threadpool_info
+
+    blas = sorted({lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+    return batch._result(job, "ok", 0, environment={k: os.environ.get(k) for k in ONE_THREAD}, blas=blas)
+
+
+def test_pool_workers_run_at_one_thread_and_this_environment_is_left_alone(project, monkeypatch):
+    for key in ONE_THREAD:
+        monkeypatch.delenv(key, raising=False)
+    before = dict(os.environ)
+    jobs = batch.read_jobs(_jobs_csv(project, [f"{n},hot.step,op0.csv,cold/{n}.step," for n in "xy"]))
+    running = batch.run_jobs(jobs, workers=1, runner=_threads_of_the_worker)
+    results = [next(running)]
+    assert dict(os.environ) == before           # while the pool runs
+    results += list(running)
+    assert dict(os.environ) == before
+    assert [r["status"] for r in results] == ["ok", "ok"]
+    for r in results:
+        assert r["environment"] == ONE_THREAD and r["blas"] == [1]
+
+
+def test_the_worker_initializer_imports_no_numpy():
+    """A spawn worker imports hot2cold.cli.workers (and hot2cold.cli) for its initializer before its first
+    job: numpy must not be loaded by then, or it would start its threads before they are set to one."""
+    code = "import sys, hot2cold.cli.workers; print(sorted({'numpy', 'hot2cold.cli.commands'} & set(sys.modules)))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "[]"

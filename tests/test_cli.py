@@ -1,14 +1,19 @@
 """The command line: a real run on a sample part, and every refusal as one line with an exit code."""
 from __future__ import annotations
 
+import argparse
 import json
+import logging
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hot2cold.cli import main
+from hot2cold.cli import commands, main
+from hot2cold.cli.options import MorphOptions
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 from hot2cold.testing.synthetic import AffineField
@@ -164,3 +169,64 @@ def test_help_lists_extrapolate_and_both_commands(capsys):
     with pytest.raises(SystemExit):
         main(["batch", "--help"])
     assert "JOBS" in capsys.readouterr().out
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def _morph_parser():
+    parser = commands._parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices["morph"]
+
+
+def test_readme_names_the_morph_options_of_the_table():
+    """The README's `hot2cold morph` usage block and its list of batch options name exactly the options of
+    the table the parser and the jobs files are made from (:class:`MorphOptions`)."""
+    text = README.read_text(encoding="utf-8")
+    usage = re.search(r"```\n(hot2cold morph .*?)```", text, re.S).group(1)
+    flags = set(re.findall(r"(?<![\w-])--?[a-z][a-z-]*", usage))
+    table = {opt.flag for opt in MorphOptions.table().values()}
+    assert table <= flags, f"README usage block lacks {sorted(table - flags)}"
+    assert flags <= set(_morph_parser()._option_string_actions), "README usage block names an unknown option"
+    listed = re.search(r"the options of `hot2cold morph` with the\s+same meaning: (.*?) \(`-` or `_`", text, re.S)
+    assert re.findall(r"`(\w+)`", listed.group(1)) == list(MorphOptions.names())
+
+
+def test_the_parser_takes_the_options_of_the_table():
+    parser = _morph_parser()
+    for name, opt in MorphOptions.table().items():
+        assert opt.flag == "--" + name.replace("_", "-")      # a jobs file's `max-refinements` is the flag's
+        assert parser._option_string_actions[opt.flag].dest == name
+    args = commands._parser().parse_args(["morph", "h.step", "f.csv", "-o", "c.step", "--field-units", "m",
+                                          "--tolerance", "1e-3", "--max-refinements", "2", "--extrapolate"])
+    options = MorphOptions.from_args(args)
+    assert options == MorphOptions(field_units="m", tolerance=1e-3, max_refinements=2, extrapolate=True)
+    assert MorphOptions.from_args(commands._parser().parse_args(["morph", "h", "f", "-o", "c"])) == MorphOptions()
+    assert options.morph_arguments() == {"units": "m", "field_name": None, "invert": False}
+    settings = options.to_settings()
+    assert (settings.tolerance, settings.max_refinements, settings.extrapolate) == (1e-3, 2, True)
+
+
+def test_the_log_goes_to_stderr_through_the_hot2cold_logger(monkeypatch, capsys):
+    """main() gives hot2cold's logger a stderr handler for the call only; the root logger is left alone."""
+    root, ours = logging.getLogger(), logging.getLogger("hot2cold")
+    before = list(root.handlers), list(ours.handlers), ours.level
+    seen = []
+
+    def run(args):
+        seen.append(list(root.handlers))
+        logging.getLogger("hot2cold.pipeline.test").warning("a warning")
+        logging.getLogger("hot2cold.pipeline.test").info("a step")
+        logging.getLogger("another.library").warning("not ours")
+        return 0
+
+    monkeypatch.setattr(commands, "_run", run)
+    assert main(["batch", "jobs.csv"]) == 0
+    assert capsys.readouterr().err == "WARNING hot2cold.pipeline.test: a warning\n"
+    assert main(["batch", "jobs.csv", "-v"]) == 0
+    assert capsys.readouterr().err == "WARNING hot2cold.pipeline.test: a warning\nINFO hot2cold.pipeline.test: a step\n"
+    assert main(["batch", "jobs.csv", "-q"]) == 0
+    assert capsys.readouterr().err == ""
+    assert seen == [before[0]] * 3
+    assert (list(root.handlers), list(ours.handlers), ours.level) == before

@@ -2,16 +2,17 @@
 
 A jobs file is CSV (a header, then one row per job) or TOML (``[[jobs]]`` tables and an optional
 ``[defaults]`` table that every job starts from).  Each job names ``hot`` (STEP), ``field`` and ``output``
-(the cold STEP), and may give the options of ``hot2cold morph``: ``report``, ``field_units``,
-``field_name``, ``invert``, ``tolerance``, ``max_refinements``, ``node_distance``, ``edge_distance``, and a
-``name`` for the summary (default: the output path as written).  Relative paths are relative to the jobs
-file's folder; option names may be written with ``-`` or ``_``.
+(the cold STEP), and may give a ``report`` (JSON), a ``name`` for the summary (default: the output path
+as written) and the options of ``hot2cold morph`` (:class:`~hot2cold.cli.options.MorphOptions`:
+``field_units``, ``tolerance``...).  Relative paths are relative to the jobs file's folder; option names
+may be written with ``-`` or ``_``.
 
 :func:`read_jobs` checks the whole file before anything runs; :func:`run_jobs` runs the jobs in a local
 process pool or on a Dask cluster and yields one result dict per job (:func:`run_job` is what a worker
-runs).  A job whose cold STEP exists with a record beside it (``<output>.hot2cold.json``, written after
-the STEP) stating the same inputs (SHA-256 of the hot STEP and the field, the options, the hot2cold
-version) and the same outputs (size and SHA-256 of the STEP and the report) is skipped.
+runs: the morph, report, check and cold STEP of :mod:`hot2cold.cli.run`, as ``hot2cold morph``).  A job
+whose cold STEP exists with a record beside it (``<output>.hot2cold.json``, written after the STEP) stating
+the same inputs (SHA-256 of the hot STEP and the field, the options, the hot2cold version) and the same
+outputs (size and SHA-256 of the STEP and the report) is skipped.
 
 Library code: nothing here prints; it logs and raises :class:`~hot2cold.errors.Hot2ColdError`.
 """
@@ -28,17 +29,15 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
 from .. import __version__
-from ..io.atomic import write_atomically
 from ..errors import Hot2ColdError, InputError
-from ..io.field import UNITS
-from ..pipeline.morph import check_result, morph
-from ..settings import Settings
+from .options import MorphOptions, to_path, to_text
+from .run import run_morph, tolerance_missed, write_cold, write_json
+from .workers import one_thread_each
 
 log = logging.getLogger(__name__)
 
@@ -47,9 +46,6 @@ REQUIRED = ("hot", "field", "output")
 
 #: What a job's result ``status`` can be; "not-run" only in the summary of an interrupted batch.
 STATUSES = ("ok", "tolerance-missed", "failed", "skipped", "not-run")
-
-#: Environment of the local workers: one thread each for the numeric libraries (the pool is the parallelism).
-ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 #: Exit code recorded for a job whose worker process died (a crash in the kernel, the memory killer).
 DIED = 70
@@ -67,14 +63,7 @@ class Job:
     field: Path
     output: Path
     report: Path | None = None
-    field_units: str = "mm"
-    field_name: str | None = None
-    invert: bool = False
-    tolerance: float | None = None
-    max_refinements: int | None = None
-    node_distance: float | None = None
-    edge_distance: float | None = None
-    extrapolate: bool = False
+    options: MorphOptions = MorphOptions()
 
     @property
     def record(self) -> Path:
@@ -86,65 +75,12 @@ class Job:
         out = [("output", self.output)] + ([("report", self.report)] if self.report else [])
         return out + [("record", self.record)]
 
-    def settings(self) -> Settings:
-        return settings_for(self.tolerance, self.max_refinements, self.node_distance, self.edge_distance,
-                            self.extrapolate)
 
-    def options(self) -> dict:
-        """The options that change the cold part, as JSON-ready values."""
-        return {"field_units": self.field_units, "field_name": self.field_name, "invert": self.invert,
-                "tolerance": self.tolerance, "max_refinements": self.max_refinements,
-                "node_distance": self.node_distance, "edge_distance": self.edge_distance,
-                "extrapolate": self.extrapolate}
+#: A job's own columns (CSV) or keys (TOML), before the morph options.
+JOB_KEYS = ("name", "hot", "field", "output", "report")
 
-
-OPTIONS = tuple(f.name for f in fields(Job))
-
-
-# --------------------------------------------------------------------------------------------------------
-# One morph: shared by `hot2cold morph` and the batch workers
-# --------------------------------------------------------------------------------------------------------
-def settings_for(tolerance: float | None = None, max_refinements: int | None = None,
-                 node_distance: float | None = None, edge_distance: float | None = None,
-                 extrapolate: bool = False) -> Settings:
-    """:class:`Settings` from the command-line options (None: the default); :class:`InputError` on a bad value."""
-    try:
-        rounds = {} if max_refinements is None else {"max_refinements": max_refinements}
-        return Settings(node_distance=node_distance, edge_distance=edge_distance, tolerance=tolerance,
-                        extrapolate=extrapolate, **rounds)
-    except ValueError as exc:
-        raise InputError(str(exc)) from exc
-
-
-def write_json(data: dict, path: str | os.PathLike) -> None:
-    """Write ``data`` as indented JSON to ``path``, whole or not at all."""
-    def write(tmp: str) -> None:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2)
-            fh.write("\n")
-
-    write_atomically([(Path(path), write)])
-
-
-def write_cold(result, output: str | os.PathLike, report: str | os.PathLike | None = None) -> Iterator[Path]:
-    """Write what a morph gives: the JSON report (if asked; written even for an invalid part), then, once
-    :func:`~hot2cold.morph.check_result` passes, the cold STEP.  Yields each path as it is written; raises
-    :class:`MorphError` (invalid part) or :class:`OutputError`."""
-    if report is not None:
-        write_json(result.report.to_dict(), report)
-        yield Path(report)
-    check_result(result)
-    result.write_step(output)
-    yield Path(output)
-
-
-def tolerance_missed(result) -> str | None:
-    """The one-line message when the morph's ``--tolerance`` was not met, else None."""
-    report = result.report
-    if report.tolerance_met is not False:
-        return None
-    return (f"tolerance {report.tolerance} mm not met (Δmax {report.delta_max:.3g} mm); "
-            f"the cold part is written")
+#: Every column or key a job may have, in the order the messages list them.
+OPTIONS = JOB_KEYS + MorphOptions.names()
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -260,65 +196,19 @@ def _job(where: str, row: dict, folder: Path) -> Job:
         for key in REQUIRED:
             if key not in values:
                 raise ValueError(f"no {key} given")
-        job = Job(**{"name": str(row["output"]).strip(), **values})
-        job.settings()
+        options = MorphOptions(**{k: v for k, v in values.items() if k not in JOB_KEYS})
+        options.to_settings()           # a bad value is refused here, with the file's line
+        own = {k: v for k, v in values.items() if k in JOB_KEYS}
+        job = Job(**{"name": str(row["output"]).strip(), **own}, options=options)
     except (ValueError, TypeError) as exc:  # InputError is a ValueError
         raise InputError(f"{where}: {exc}") from None
     return job
 
 
-def _path(value, folder: Path) -> Path:
-    if not isinstance(value, str):
-        raise ValueError(f"must be a path (text), got {value!r}")
-    return Path(os.path.abspath(folder / Path(value).expanduser()))
-
-
-def _text(value, folder: Path) -> str:
-    if not isinstance(value, str):
-        raise ValueError(f"must be text, got {value!r}")
-    return value
-
-
-def _units(value, folder: Path) -> str:
-    key = str(value).strip().lower()
-    if key not in UNITS:
-        raise ValueError(f"must be one of {', '.join(UNITS)}, got {value!r}")
-    return key
-
-
-def _flag(value, folder: Path) -> bool:
-    if isinstance(value, bool):
-        return value
-    word = str(value).strip().lower()
-    if word in ("1", "true", "yes", "y", "on"):
-        return True
-    if word in ("0", "false", "no", "n", "off"):
-        return False
-    raise ValueError(f"must be true or false, got {value!r}")
-
-
-def _number(value, folder: Path) -> float:
-    try:
-        if isinstance(value, bool):
-            raise ValueError
-        return float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"must be a number (mm), got {value!r}") from None
-
-
-def _count(value, folder: Path) -> int:
-    try:
-        if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-            raise ValueError
-        return int(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"must be a whole number, got {value!r}") from None
-
-
-_CONVERT: dict[str, Callable] = {
-    "name": _text, "hot": _path, "field": _path, "output": _path, "report": _path, "field_units": _units,
-    "field_name": _text, "invert": _flag, "tolerance": _number, "max_refinements": _count,
-    "node_distance": _number, "edge_distance": _number, "extrapolate": _flag}
+#: The converter of each column or key: a CSV cell (stripped text) or a TOML value -> the job's value.
+_CONVERT: dict[str, Callable] = {"name": to_text, "hot": to_path, "field": to_path, "output": to_path,
+                                 "report": to_path,
+                                 **{name: opt.convert for name, opt in MorphOptions.table().items()}}
 
 
 def _check_jobs(path: Path, wheres: list[str], jobs: list[Job], summary) -> None:
@@ -372,7 +262,7 @@ def fingerprint(job: Job, cache: dict | None = None) -> dict:
     """What the job's cold part depends on: the contents of its inputs, its options, the hot2cold version.
     Paths are not part of it (a moved project folder keeps its runs).  Raises OSError for a missing input."""
     return {"hot2cold": __version__, "hot": _digest(job.hot, cache), "field": _digest(job.field, cache),
-            "options": job.options(), "report": job.report is not None}
+            "options": job.options.as_dict(), "report": job.report is not None}
 
 
 def done_before(job: Job, cache: dict | None = None) -> dict | None:
@@ -437,8 +327,7 @@ def run_job(job: Job) -> dict:
             inputs = fingerprint(job)   # before the inputs are read: a change during the run shows next time
         except OSError:
             inputs = None               # a missing input: the morph says which
-        result = morph(job.hot, job.field, job.settings(), units=job.field_units, field_name=job.field_name,
-                       invert=job.invert)
+        result = run_morph(job.hot, job.field, job.options)
         for _ in write_cold(result, job.output, job.report):
             pass
         missed = tolerance_missed(result)
@@ -510,70 +399,55 @@ def cores() -> int:
         return os.cpu_count() or 1
 
 
-@contextmanager
-def _one_thread_each():
-    """The environment the pool's workers are spawned with (set here, as their imports read it at once)."""
-    saved = {k: os.environ.get(k) for k in ONE_THREAD}
-    os.environ.update(ONE_THREAD)
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 def _died(job: Job, exc: BaseException) -> dict:
     return _result(job, "failed", DIED, f"the worker process died running this job ({_one_line(exc)}): "
                    f"a crash in the kernel or out of memory?")
 
 
 def _in_pool(jobs: list[Job], workers: int, runner) -> Iterator[dict]:
-    """The jobs in local "spawn" processes, at most ``workers`` at a time.  A worker that dies breaks the
-    pool: the jobs that were running then are run again one by one (so the job that kills its worker is
-    the one that fails), the rest in a new pool."""
+    """The jobs in local "spawn" processes, at most ``workers`` at a time, each process at one thread
+    (:func:`~hot2cold.cli.workers.one_thread_each`; this process's environment is left alone).  A worker
+    that dies breaks the pool: the jobs that were running then are run again one by one (so the job that
+    kills its worker is the one that fails), the rest in a new pool."""
     queue, suspects = list(jobs), []
     context = multiprocessing.get_context("spawn")
     while queue or suspects:
         alone = bool(suspects)
         todo = [suspects.pop(0)] if alone else queue
         size = 1 if alone else min(workers, len(queue))
-        with _one_thread_each():
-            pool = ProcessPoolExecutor(size, mp_context=context)
-            clean = False
-            try:
-                running: dict = {}
-                broken = False
-                while (todo or running) and not broken:
-                    try:
-                        while todo and len(running) < size:
-                            running[pool.submit(runner, todo[0])] = todo[0]
-                            todo.pop(0)
-                    except BrokenProcessPool:   # a worker died since the last wait: the job stays queued
-                        broken = True
-                    done, _ = wait(running, return_when=FIRST_COMPLETED)
-                    broken = broken or any(isinstance(f.exception(), BrokenProcessPool) for f in done)
-                    if broken:
-                        done, _ = wait(running)   # every running job ends with the pool
-                    for future in done:
-                        job = running.pop(future)
-                        exc = future.exception()
-                        if isinstance(exc, BrokenProcessPool):
-                            if alone:
-                                yield _died(job, exc)
-                            else:
-                                log.warning("a worker process died; job %s is run again on its own", job.name)
-                                suspects.append(job)
-                        elif exc is not None:   # the runner could not be called (pickling) or raised
-                            yield _result(job, "failed", 70, f"internal error: {type(exc).__name__}: "
-                                          f"{_one_line(exc)}")
+        pool = ProcessPoolExecutor(size, mp_context=context, initializer=one_thread_each)
+        clean = False
+        try:
+            running: dict = {}
+            broken = False
+            while (todo or running) and not broken:
+                try:
+                    while todo and len(running) < size:
+                        running[pool.submit(runner, todo[0])] = todo[0]
+                        todo.pop(0)
+                except BrokenProcessPool:   # a worker died since the last wait: the job stays queued
+                    broken = True
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                broken = broken or any(isinstance(f.exception(), BrokenProcessPool) for f in done)
+                if broken:
+                    done, _ = wait(running)   # every running job ends with the pool
+                for future in done:
+                    job = running.pop(future)
+                    exc = future.exception()
+                    if isinstance(exc, BrokenProcessPool):
+                        if alone:
+                            yield _died(job, exc)
                         else:
-                            yield future.result()
-                clean = True
-            finally:
-                pool.shutdown(wait=clean, cancel_futures=True)
+                            log.warning("a worker process died; job %s is run again on its own", job.name)
+                            suspects.append(job)
+                    elif exc is not None:   # the runner could not be called (pickling) or raised
+                        yield _result(job, "failed", 70, f"internal error: {type(exc).__name__}: "
+                                      f"{_one_line(exc)}")
+                    else:
+                        yield future.result()
+            clean = True
+        finally:
+            pool.shutdown(wait=clean, cancel_futures=True)
 
 
 def _distributed():

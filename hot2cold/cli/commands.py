@@ -31,7 +31,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import Hot2ColdError, InputError, OutputError, StepReadError
-from ..io.field import UNITS
+from .options import MorphOptions
 
 log = logging.getLogger("hot2cold")
 
@@ -48,25 +48,7 @@ def _parser() -> argparse.ArgumentParser:
                    "hot-to-cold displacements), or .npz with arrays points and displacements")
     m.add_argument("-o", "--output", type=Path, required=True, help="cold part, STEP file to write")
     m.add_argument("--report", type=Path, help="write the accuracy report as JSON here")
-    m.add_argument("--field-units", choices=sorted(UNITS), default="mm",
-                   help="length unit of the field file (default mm)")
-    m.add_argument("--field-name", metavar="NAME",
-                   help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
-    m.add_argument("--invert", action="store_true",
-                   help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
-    m.add_argument("--tolerance", type=float, metavar="MM",
-                   help="largest accepted error (Δmax of every face and edge): where it is missed, faces and edges "
-                   "are refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted again; "
-                   "exit code 5 when it still is not met")
-    m.add_argument("--max-refinements", type=int, metavar="N",
-                   help="rounds of refinement for --tolerance at the most (default 4)")
-    m.add_argument("--node-distance", type=float, metavar="MM",
-                   help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
-    m.add_argument("--edge-distance", type=float, metavar="MM",
-                   help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
-    m.add_argument("--extrapolate", action="store_true",
-                   help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
-                   "warning); without it such a field is refused")
+    MorphOptions.add_arguments(m)
     views = m.add_argument_group("viewer exports (written after the cold STEP)")
     views.add_argument("--vtu", type=Path, metavar="NODES.vtu",
                        help="for ParaView: two files, NODES.vtu = the FE nodes at their hot positions with point "
@@ -87,9 +69,9 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("batch", help="morph the jobs of a CSV or TOML jobs file, in parallel",
                        description="Run the morphs listed in JOBS (CSV: a header hot,field,output[,options] and a "
                        "row per job; TOML: [[jobs]] tables and an optional [defaults] table). Options as for "
-                       "morph: name, report, field_units, field_name, invert, tolerance, max_refinements, "
-                       "node_distance, edge_distance, extrapolate. Relative paths are relative to JOBS' folder. A job whose "
-                       "cold STEP and record (OUTPUT.hot2cold.json) show the same inputs is skipped. Exit code "
+                       f"morph: {', '.join(('name', 'report') + MorphOptions.names())}. Relative paths are "
+                       "relative to JOBS' folder. A job whose cold STEP and record (OUTPUT.hot2cold.json) show "
+                       "the same inputs is skipped. Exit code "
                        "0: all ok or skipped; 1: a job failed; 5: a tolerance missed; 2: unusable JOBS.")
     b.add_argument("jobs", type=Path, metavar="JOBS", help="jobs file, .csv or .toml")
     where = b.add_mutually_exclusive_group()
@@ -232,8 +214,7 @@ def _write_exports(args, result):
 
 
 def _morph(args) -> int:
-    from .batch import settings_for, tolerance_missed, write_cold
-    from ..pipeline.morph import morph
+    from .run import run_morph, tolerance_missed, write_cold
 
     _check_input(args.hot, "STEP file")
     _check_input(args.field, "field file")
@@ -241,12 +222,9 @@ def _morph(args) -> int:
     _check_options(args)
     if args.html:
         _html_writer()
-    settings = settings_for(args.tolerance, args.max_refinements, args.node_distance, args.edge_distance,
-                            args.extrapolate)
     progress = None if args.quiet else _Progress(sys.stderr)
     try:
-        result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
-                       invert=args.invert, progress=progress)
+        result = run_morph(args.hot, args.field, MorphOptions.from_args(args), progress)
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
@@ -287,6 +265,7 @@ def _no_solid(path: Path, exc: StepReadError) -> StepReadError:
 
 def _batch(args) -> int:
     from . import batch
+    from .run import write_json
 
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be at least 1, got {args.workers}")
@@ -301,7 +280,7 @@ def _batch(args) -> int:
     def write_summary() -> dict:
         data = batch.summary(args.jobs, jobs, results, **backend, force=args.force,
                              wall_seconds=round(time.perf_counter() - start, 2))
-        batch.write_json(data, summary)
+        write_json(data, summary)
         return data
 
     try:
@@ -329,19 +308,19 @@ def _batch(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``hot2cold`` console script; returns the exit code."""
     args = _parser().parse_args(argv)
-    # Log records go to this run's stderr: -q errors only, default warnings too, -v every step of hot2cold.
+    # hot2cold's log records go to this run's stderr: -q errors only, default warnings too, -v every step.
+    # The handler is hot2cold's own, for this call only; the root logger is left to the application.
     level = logging.ERROR if args.quiet else logging.INFO if args.verbose else logging.WARNING
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     handler.setLevel(level)
-    root = logging.getLogger()
     saved = log.level
-    root.addHandler(handler)
+    log.addHandler(handler)
     log.setLevel(level)
     try:
         return _run(args)
     finally:
-        root.removeHandler(handler)
+        log.removeHandler(handler)
         log.setLevel(saved)
 
 

@@ -1,0 +1,184 @@
+"""The options of a morph, in one table: :class:`MorphOptions`.
+
+``hot2cold morph`` takes them as flags (``--field-units m``), a batch jobs file as columns or keys
+(``field_units``, also written ``field-units``); both come from the fields of :class:`MorphOptions`, whose
+metadata (an :class:`Option`) holds the flag, metavar, help text and the converter of a jobs-file value.
+The README's usage block and its list of batch options name the same options (a test compares them).
+
+A new option is one field here (with its :class:`Option`), its use in :meth:`MorphOptions.to_settings` or
+:meth:`MorphOptions.morph_arguments`, and a word in the README.
+
+Library code: nothing here prints; a bad value raises :class:`~hot2cold.errors.InputError` (options) or
+``ValueError`` (a converter: the words that follow the option's name in the message).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Callable
+
+from ..errors import InputError
+from ..io.field import UNITS
+from ..settings import Settings
+
+
+# --------------------------------------------------------------------------------------------------------
+# Converters of jobs-file values: a CSV cell (text, stripped) or a TOML value -> the option's value.
+# Each takes the jobs file's folder (for paths) and raises ValueError("must be ..., got ...").
+# --------------------------------------------------------------------------------------------------------
+def to_path(value, folder: Path) -> Path:
+    """An absolute path; a relative one is taken relative to ``folder`` (the jobs file's)."""
+    if not isinstance(value, str):
+        raise ValueError(f"must be a path (text), got {value!r}")
+    return Path(os.path.abspath(folder / Path(value).expanduser()))
+
+
+def to_text(value, folder: Path) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"must be text, got {value!r}")
+    return value
+
+
+def to_units(value, folder: Path) -> str:
+    key = str(value).strip().lower()
+    if key not in UNITS:
+        raise ValueError(f"must be one of {', '.join(UNITS)}, got {value!r}")
+    return key
+
+
+def to_flag(value, folder: Path) -> bool:
+    if isinstance(value, bool):
+        return value
+    word = str(value).strip().lower()
+    if word in ("1", "true", "yes", "y", "on"):
+        return True
+    if word in ("0", "false", "no", "n", "off"):
+        return False
+    raise ValueError(f"must be true or false, got {value!r}")
+
+
+def to_number(value, folder: Path) -> float:
+    try:
+        if isinstance(value, bool):
+            raise ValueError
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a number (mm), got {value!r}") from None
+
+
+def to_count(value, folder: Path) -> int:
+    try:
+        if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+            raise ValueError
+        return int(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a whole number, got {value!r}") from None
+
+
+# --------------------------------------------------------------------------------------------------------
+# The table
+# --------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Option:
+    """How one morph option is given.
+
+    flag : the ``hot2cold morph`` flag (``--`` and the field's name with ``-`` for ``_``).
+    help : argparse's help text (a ``%`` written ``%%``).
+    convert : a jobs-file value -> the option's value (``value, folder``; ValueError when unusable).
+    type : argparse's converter of the flag's argument; None for a switch (``store_true``).
+    metavar, choices : as argparse's.
+    """
+
+    flag: str
+    help: str
+    convert: Callable
+    type: Callable | None = None
+    metavar: str | None = None
+    choices: tuple[str, ...] | None = None
+
+
+def _option(default, *, flag: str, convert: Callable, help: str, **more):
+    """A field of :class:`MorphOptions`: its default and its :class:`Option` as metadata."""
+    return field(default=default, metadata={"option": Option(flag=flag, help=help, convert=convert, **more)})
+
+
+@dataclass(frozen=True)
+class MorphOptions:
+    """The options of one morph, as ``hot2cold morph`` and a batch job take them (None: the default of
+    :class:`~hot2cold.settings.Settings`).  Lengths in mm.  The fields' order is the order of ``--help``,
+    of the jobs-file messages and of a batch record's ``options``."""
+
+    field_units: str = _option(
+        "mm", flag="--field-units", convert=to_units, type=str, choices=tuple(sorted(UNITS)),
+        help="length unit of the field file (default mm)")
+    field_name: str | None = _option(
+        None, flag="--field-name", convert=to_text, type=str, metavar="NAME",
+        help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
+    invert: bool = _option(
+        False, flag="--invert", convert=to_flag,
+        help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
+    tolerance: float | None = _option(
+        None, flag="--tolerance", convert=to_number, type=float, metavar="MM",
+        help="largest accepted error (Δmax of every face and edge): where it is missed, faces and edges are "
+        "refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted again; exit code 5 "
+        "when it still is not met")
+    max_refinements: int | None = _option(
+        None, flag="--max-refinements", convert=to_count, type=int, metavar="N",
+        help="rounds of refinement for --tolerance at the most (default 4)")
+    node_distance: float | None = _option(
+        None, flag="--node-distance", convert=to_number, type=float, metavar="MM",
+        help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
+    edge_distance: float | None = _option(
+        None, flag="--edge-distance", convert=to_number, type=float, metavar="MM",
+        help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
+    extrapolate: bool = _option(
+        False, flag="--extrapolate", convert=to_flag,
+        help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
+        "warning); without it such a field is refused")
+
+    @staticmethod
+    def names() -> tuple[str, ...]:
+        """The options' names, in the table's order (the jobs-file columns and keys)."""
+        return tuple(f.name for f in fields(MorphOptions))
+
+    @staticmethod
+    def table() -> dict[str, Option]:
+        """Every option's :class:`Option` by name, in the table's order."""
+        return {f.name: f.metadata["option"] for f in fields(MorphOptions)}
+
+    @staticmethod
+    def add_arguments(parser: argparse.ArgumentParser) -> None:
+        """Add the options' flags to ``parser`` (the ``hot2cold morph`` parser), in the table's order."""
+        for f in fields(MorphOptions):
+            opt: Option = f.metadata["option"]
+            if opt.type is None:
+                parser.add_argument(opt.flag, action="store_true", help=opt.help)
+            else:
+                parser.add_argument(opt.flag, type=opt.type, default=f.default, metavar=opt.metavar,
+                                    choices=opt.choices, help=opt.help)
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> MorphOptions:
+        """The options of a parsed ``hot2cold morph`` command line."""
+        return cls(**{name: getattr(args, name) for name in cls.names()})
+
+    def to_settings(self) -> Settings:
+        """:class:`~hot2cold.settings.Settings` from these options (None: the default); :class:`InputError`
+        on a bad value."""
+        try:
+            rounds = {} if self.max_refinements is None else {"max_refinements": self.max_refinements}
+            return Settings(node_distance=self.node_distance, edge_distance=self.edge_distance,
+                            tolerance=self.tolerance, extrapolate=self.extrapolate, **rounds)
+        except ValueError as exc:
+            raise InputError(str(exc)) from exc
+
+    def morph_arguments(self) -> dict:
+        """The keyword arguments of :func:`~hot2cold.pipeline.morph.morph` that are not in the settings."""
+        return {"units": self.field_units, "field_name": self.field_name, "invert": self.invert}
+
+    def as_dict(self) -> dict:
+        """The options as JSON-ready values, in the table's order (a batch record's ``options``, hashed for
+        skip-on-rerun: its keys and values must not change for the same options)."""
+        return {name: getattr(self, name) for name in self.names()}

@@ -1,0 +1,57 @@
+"""One morph run, as ``hot2cold morph`` and every batch job do it: morph with the options, write the
+report, check the cold part, write the cold STEP, say when the tolerance was missed.
+
+Library code: nothing here prints; it raises :class:`~hot2cold.errors.Hot2ColdError`.  The morph and the
+kernel are imported when first used, so the command line starts (and ``--help`` answers) without them.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Iterator
+
+from ..io.atomic import write_atomically
+from .options import MorphOptions
+
+
+def run_morph(hot, field, options: MorphOptions, progress=None):
+    """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path) with ``field`` (field file path) under
+    ``options``; returns the :class:`~hot2cold.pipeline.morph.MorphResult`."""
+    from ..pipeline.morph import morph
+
+    return morph(hot, field, options.to_settings(), **options.morph_arguments(), progress=progress)
+
+
+def write_json(data: dict, path: str | os.PathLike) -> None:
+    """Write ``data`` as indented JSON to ``path``, whole or not at all."""
+    def write(tmp: str) -> None:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=2)
+            fh.write("\n")
+
+    write_atomically([(Path(path), write)])
+
+
+def write_cold(result, output: str | os.PathLike, report: str | os.PathLike | None = None) -> Iterator[Path]:
+    """Write what a morph gives: the JSON report (if asked; written even for an invalid part), then, once
+    :func:`~hot2cold.pipeline.morph.check_result` passes, the cold STEP.  ``result`` is the morph's
+    :class:`~hot2cold.pipeline.morph.MorphResult`, already made.  Yields each path as it is written; raises
+    :class:`MorphError` (invalid part) or :class:`OutputError`."""
+    from ..pipeline.morph import check_result
+
+    if report is not None:
+        write_json(result.report.to_dict(), report)
+        yield Path(report)
+    check_result(result)
+    result.write_step(output)
+    yield Path(output)
+
+
+def tolerance_missed(result) -> str | None:
+    """The one-line message when the morph's ``--tolerance`` was not met, else None."""
+    report = result.report
+    if report.tolerance_met is not False:
+        return None
+    return (f"tolerance {report.tolerance} mm not met (Δmax {report.delta_max:.3g} mm); "
+            f"the cold part is written")
