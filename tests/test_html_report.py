@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from hot2cold import html_report, visual
+from hot2cold.views import page as html_report, pictures as visual
 from hot2cold.core.bspline import evaluate_surface
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

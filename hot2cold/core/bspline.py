@@ -384,6 +384,12 @@ def surface_derivative_bases(surface: BSplineSurface, u, v) -> tuple[_sparse.csr
     return _cols_to_csr(cols, du, n), _cols_to_csr(cols, dv, n)
 
 
+def clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
+    """Parameters ``uv (m, 2)`` clipped to the surface's domain, however far outside (no tolerance check)."""
+    u0, u1, v0, v1 = surface.domain
+    return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
+
+
 def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
     """Points ``C(t)`` (m, 3) of ``curve`` at parameters ``t`` (m,)."""
     return curve_basis(curve, t) @ curve.poles
