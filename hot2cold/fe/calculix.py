@@ -39,7 +39,6 @@ import shutil
 import subprocess
 import tempfile
 import time
-import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FieldError
+from ..io.atomic import write_atomically
 from ..io.field import DisplacementField, match_points
 from .frd import HOT_TO_COLD_HEADING, FrdFile
 from .mesh import SolverError, TetMesh, mesh_step, step_bounding_box
@@ -388,20 +388,18 @@ def hub_faces(mesh: TetMesh, axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 0.
 
 
 def _write_npz(field: DisplacementField, path: Path) -> None:
-    """Write ``points``, ``displacements``, ``node_ids`` compressed, atomically, under exactly ``path``."""
+    """Write ``points``, ``displacements``, ``node_ids`` compressed under exactly ``path``, whole or not at all
+    (:func:`hot2cold.io.atomic.write_atomically`: a failed write raises OutputError and leaves nothing)."""
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise FieldError(f"output folder does not exist: {folder}")
-    # A temporary name opened with open(): unlike mkstemp's 0600, the file gets the umask's permissions.
-    tmp = folder / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        with open(tmp, "xb") as fh:
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as fh:             # a file object: savez given a name would add ".npz" to it
             np.savez_compressed(fh, points=field.points, displacements=field.displacements,
                                 node_ids=field.node_ids)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    write_atomically([(path, write)])
 
 
 def hot_to_cold_field(step_path, out_path=None, *, size: float | None = None, min_size: float | None = None,
