@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hot2cold.core.bspline import evaluate_surface
-from hot2cold.fe.calculix import hot_to_cold_field
+from hot2cold.fe.calculix import LoadCase, MeshOptions, hot_to_cold_field
 from hot2cold.kernel.step import read_step
 from hot2cold.kernel.topology import decompose
 
@@ -44,11 +44,12 @@ def mixer_temperature(points: np.ndarray) -> np.ndarray:
 
 def main() -> int:
     jobs = [
-        ("rotor37_blade", dict(size=1.5, min_size=0.15, omega=1800.0, axis_point=(0, 0, 0),
-                               axis_direction=(0, 0, 1))),
-        ("mixer_segment", dict(size=4.0, min_size=0.6, omega=0.0, axis_point=(0, 0, 0), axis_direction=(1, 0, 0),
-                               hot_temperature=mixer_temperature,
-                               fixed_faces=[_face_nearest(HERE / "mixer_segment.step", 0)])),
+        ("rotor37_blade", dict(mesh=MeshOptions(size=1.5, min_size=0.15),
+                               load=LoadCase(omega=1800.0, axis_point=(0, 0, 0), axis_direction=(0, 0, 1)))),
+        ("mixer_segment", dict(mesh=MeshOptions(size=4.0, min_size=0.6),
+                               load=LoadCase(omega=0.0, axis_point=(0, 0, 0), axis_direction=(1, 0, 0),
+                                             hot_temperature=mixer_temperature,
+                                             fixed_faces=[_face_nearest(HERE / "mixer_segment.step", 0)]))),
     ]
     for name, options in jobs:
         start = time.perf_counter()

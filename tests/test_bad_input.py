@@ -21,6 +21,7 @@ from hot2cold.cli import commands
 from hot2cold.cli import main
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.testing.synthetic import AffineField
+from hot2cold.io import inputs
 
 FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 
@@ -98,7 +99,7 @@ def test_step_unreadable(tmp_path, box, out, capsys, monkeypatch):
     hot.chmod(0)
     real = os.access
     # (root may read any file: the permission test itself is what is simulated)
-    monkeypatch.setattr(commands.os, "access", lambda p, mode, *a, **k:
+    monkeypatch.setattr(inputs.os, "access", lambda p, mode, *a, **k:
                         False if mode == os.R_OK and Path(p) == hot else real(p, mode, *a, **k))
     _refused(capsys, _morph(hot, box[2], out), 2,
              r"cannot read STEP file .*locked\.step: permission denied; check its permissions$", out)
@@ -202,7 +203,7 @@ def test_field_unreadable(tmp_path, box, out, capsys, monkeypatch):
     field = tmp_path / "locked.csv"
     field.write_bytes(box[2].read_bytes())
     real = os.access
-    monkeypatch.setattr(commands.os, "access", lambda p, mode, *a, **k:
+    monkeypatch.setattr(inputs.os, "access", lambda p, mode, *a, **k:
                         False if mode == os.R_OK and Path(p) == field else real(p, mode, *a, **k))
     _refused(capsys, _morph(box[0], field, out), 2,
              r"cannot read field file .*locked\.csv: permission denied; check its permissions$", out)

@@ -18,8 +18,8 @@ import pytest
 import hot2cold.fe.calculix as calculix
 from hot2cold.errors import StepReadError
 from hot2cold.fe import SolverError, TetMesh, mesh_step
-from hot2cold.fe.calculix import (TI6AL4V, Material, blade_temperature, hot_to_cold_field, hub_faces,
-                                  read_hot_to_cold, run_ccx, write_deck)
+from hot2cold.fe.calculix import (TI6AL4V, LoadCase, Material, MeshOptions, SolverOptions, blade_temperature,
+                                  hot_to_cold_field, hub_faces, read_hot_to_cold, run_ccx, write_deck)
 from hot2cold.fe.frd import read_frd
 from hot2cold.io.field import read_field
 from hot2cold.kernel.project import Projector
@@ -306,7 +306,8 @@ def test_run_ccx_errors(rod_mesh, tmp_path):
 def test_hot_to_cold_field_pipeline(parts, tmp_path):
     """The whole pipeline on a blade-like box at radius 100..140 mm, root fixed (found as the hub face)."""
     out = tmp_path / "field.npz"
-    field = hot_to_cold_field(parts["blade"], out, size=1.5, min_size=0.5, work_dir=tmp_path / "run")
+    field = hot_to_cold_field(parts["blade"], out, mesh=MeshOptions(size=1.5, min_size=0.5),
+                              solver=SolverOptions(work_dir=tmp_path / "run"))
     assert (tmp_path / "run" / "hot2cold.frd").exists() and (tmp_path / "run" / "hot2cold.log").exists()
     mesh = mesh_step(parts["blade"], 1.5, 0.5)  # the same mesh again: reproducible
     surface = mesh.boundary_nodes()
@@ -329,7 +330,8 @@ def test_hot_to_cold_field_pipeline(parts, tmp_path):
     u_tip = field.displacements[np.abs(x - r1) < 1e-9, 0].mean()
     assert -u_tip == pytest.approx(thermal + spin, rel=2e-2)
     # No rotation: thermal only.
-    still = hot_to_cold_field(parts["blade"], None, size=1.5, min_size=0.5, omega=0.0, nodes="all")
+    still = hot_to_cold_field(parts["blade"], None, mesh=MeshOptions(size=1.5, min_size=0.5), load=LoadCase(omega=0.0),
+                              nodes="all")
     assert len(still) == len(mesh.nodes)
     x = still.points[:, 0]
     assert -still.displacements[np.abs(x - r1) < 1e-9, 0].mean() == pytest.approx(thermal, rel=2e-2)

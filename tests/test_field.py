@@ -322,17 +322,17 @@ def test_missing_file(tmp_path):
 
 
 def test_directory(tmp_path):
-    raises(tmp_path, "is a directory")
+    raises(tmp_path, "is a folder: give the file itself")
 
 
 def test_unreadable_file(tmp_path, monkeypatch):
-    import hot2cold.io.field as field_module
+    import hot2cold.io.inputs as inputs_module
 
     def denied(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
     path = write(tmp_path, "x,y,z,dx,dy,dz\n1,2,3,4,5,6\n")
-    monkeypatch.setattr(field_module, "open", denied, raising=False)
+    monkeypatch.setattr(inputs_module, "open", denied, raising=False)
     raises(path, "cannot read field file .*: permission denied")
 
 

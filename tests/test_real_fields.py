@@ -55,11 +55,12 @@ def test_mixer_morph_lobed_faces(mixer):
 
 @pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
 def test_step_to_gmsh_to_ccx_to_cold_step(tmp_path):
-    from hot2cold.fe.calculix import hot_to_cold_field
+    from hot2cold.fe.calculix import LoadCase, MeshOptions, hot_to_cold_field
     step = SAMPLES / "twisted_blade.step"
     # the blade stands on a disc of radius 150 mm turning about the x axis: its span z is radial
-    field = hot_to_cold_field(step, tmp_path / "field.npz", size=5.0, min_size=0.8, omega=1500.0,
-                              axis_point=(0.0, 0.0, -150.0), axis_direction=(1.0, 0.0, 0.0))
+    field = hot_to_cold_field(step, tmp_path / "field.npz", mesh=MeshOptions(size=5.0, min_size=0.8),
+                              load=LoadCase(omega=1500.0, axis_point=(0.0, 0.0, -150.0),
+                                            axis_direction=(1.0, 0.0, 0.0)))
     assert len(field) > 1000 and np.linalg.norm(field.displacements, axis=1).max() > 0.05
     result = morph(step, tmp_path / "field.npz")
     check_result(result)

@@ -14,8 +14,8 @@ from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve, GeomAPI_ProjectPointOnSurf
 from OCP.GProp import GProp_GProps
 from OCP.gp import gp_Pnt
 
-from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, insert_knots,
-                              surface_normals)
+from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, elevated_knots, evaluate_curve, evaluate_surface,
+                                   insert_knots, refine_curve, refine_surface, surface_normals)
 from hot2cold.cli import main
 from hot2cold.pipeline.face_fit import _side_of
 from hot2cold.kernel.validity import check_solids
@@ -23,7 +23,7 @@ from hot2cold.kernel.convert import curve_to_record, record_to_curve, record_to_
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.kernel.step import read_step, write_step
 from hot2cold.pipeline.morph import check_result, morph
-from hot2cold.pipeline.refine import edge_distances, elevated_knots, face_distances, refine_curve, refine_surface
+from hot2cold.pipeline.refine import edge_distances, face_distances
 from hot2cold.settings import Settings
 
 from conftest import SAMPLES

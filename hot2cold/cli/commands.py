@@ -31,6 +31,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import Hot2ColdError, InputError, OutputError, StepReadError
+from ..io.inputs import check_input_file
 from .options import MorphOptions
 
 log = logging.getLogger("hot2cold")
@@ -128,16 +129,6 @@ class _BatchProgress:
         self.stream.flush()
 
 
-def _check_input(path: Path, what: str) -> None:
-    """Refuse an input file before anything is loaded: missing, a folder, or not readable."""
-    if not path.exists():
-        raise InputError(f"{what} not found: {path}; check the path")
-    if path.is_dir():
-        raise InputError(f"{what} {path} is a folder: give the file itself")
-    if not os.access(path, os.R_OK):
-        raise InputError(f"cannot read {what} {path}: permission denied; check its permissions")
-
-
 def _check_output(inputs, output: Path, what: str) -> None:
     """Refuse ``output`` before the long run: it is one of ``inputs`` (a path or paths), or its folder is
     missing or not writable."""
@@ -216,8 +207,8 @@ def _write_exports(args, result):
 def _morph(args) -> int:
     from .run import run_morph, tolerance_missed, write_cold
 
-    _check_input(args.hot, "STEP file")
-    _check_input(args.field, "field file")
+    check_input_file(args.hot, "STEP file")            # refused before anything is loaded
+    check_input_file(args.field, "field file")
     _check_outputs(args)
     _check_options(args)
     if args.html:

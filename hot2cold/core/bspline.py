@@ -384,6 +384,12 @@ def surface_derivative_bases(surface: BSplineSurface, u, v) -> tuple[_sparse.csr
     return _cols_to_csr(cols, du, n), _cols_to_csr(cols, dv, n)
 
 
+def clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
+    """Parameters ``uv (m, 2)`` clipped to the surface's domain, however far outside (no tolerance check)."""
+    u0, u1, v0, v1 = surface.domain
+    return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
+
+
 def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
     """Points ``C(t)`` (m, 3) of ``curve`` at parameters ``t`` (m,)."""
     return curve_basis(curve, t) @ curve.poles
@@ -429,40 +435,94 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     return out
 
 
+# ----------------------------------------------------------------------------------------------------------
+# Refinement: knot insertion and degree elevation, exact to rounding (the one copy: hot2cold.pipeline.refine
+# refines the morph's records with it, and hot2cold.kernel.rebuild gives the kernel objects the refined
+# records' knots and degrees).
+# ----------------------------------------------------------------------------------------------------------
+
+def _basis(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
+    """The dense basis matrix ``(len(t), n)`` of the degree-``degree`` B-splines on ``knots`` at ``t``."""
+    n = len(knots) - degree - 1
+    return curve_basis(BSplineCurve(np.zeros((n, 3)), knots, degree), t).toarray()
+
+
+def refinement_matrix(old_knots, old_degree: int, new_knots, new_degree: int) -> np.ndarray:
+    """The matrix ``T (n_new, n_old)`` taking B-spline coefficients on ``(old_knots, old_degree)`` to the
+    same function on ``(new_knots, new_degree)``, which must hold the old spline space (inserted knots,
+    raised degree with every knot's multiplicity raised as much).  Found by collocation at the Greville
+    points of the new knots, where the new basis matrix is non-singular (Schoenberg-Whitney)."""
+    new_knots = np.asarray(new_knots, float)
+    n_new = len(new_knots) - new_degree - 1
+    tau = np.array([new_knots[j + 1:j + new_degree + 1].mean() for j in range(n_new)])
+    old = _basis(np.asarray(old_knots, float), old_degree, tau)
+    return np.linalg.solve(_basis(new_knots, new_degree, tau), old)
+
+
+def elevated_knots(knots, degree: int, new_degree: int) -> np.ndarray:
+    """The knot vector of the degree-``new_degree`` space holding the degree-``degree`` splines on ``knots``:
+    every distinct knot's multiplicity raised by ``new_degree - degree``."""
+    values, counts = np.unique(np.asarray(knots, float), return_counts=True)
+    return np.repeat(values, counts + max(new_degree - degree, 0))
+
+
+def _homogeneous(poles: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
+    """Homogeneous poles ``(..., 4)``: ``(w P, w)`` of poles ``(..., 3)`` and weights ``(...)`` (None: 1)."""
+    w = np.ones(poles.shape[:-1]) if weights is None else weights
+    return np.concatenate([poles * w[..., None], w[..., None]], axis=-1)
+
+
+def _with_knots(knots: np.ndarray, degree: int, new_degree: int, inserted) -> np.ndarray:
+    return np.sort(np.concatenate([elevated_knots(knots, degree, new_degree), np.asarray(inserted, float)]))
+
+
+def refine_surface(surface: BSplineSurface, axis: int, inserted=(), degree: int | None = None) -> BSplineSurface:
+    """The same surface with its u (``axis`` 0) or v (1) direction raised to ``degree`` (if higher) and the
+    knots ``inserted`` added: the one knot refinement and degree elevation of the package.  The poles are
+    ``T`` (:func:`refinement_matrix`) times the homogeneous poles ``(w P, w)``, so rational surfaces keep their
+    shape; refinement changes the control net, never the geometry (to rounding).  Returns ``surface`` itself
+    when nothing is asked."""
+    old_knots = surface.u_knots if axis == 0 else surface.v_knots
+    old_degree = surface.u_degree if axis == 0 else surface.v_degree
+    new_degree = max(old_degree, degree or old_degree)
+    knots = _with_knots(old_knots, old_degree, new_degree, inserted)
+    if new_degree == old_degree and len(knots) == len(old_knots):
+        return surface
+    t = refinement_matrix(old_knots, old_degree, knots, new_degree)
+    homo = _homogeneous(surface.poles, surface.weights)
+    homo = np.einsum("ij,jkl->ikl", t, homo) if axis == 0 else np.einsum("kj,ijl->ikl", t, homo)
+    w = homo[..., 3]
+    poles, weights = homo[..., :3] / w[..., None], (None if surface.weights is None else w)
+    if axis == 0:
+        return BSplineSurface(poles, knots, surface.v_knots, new_degree, surface.v_degree, weights)
+    return BSplineSurface(poles, surface.u_knots, knots, surface.u_degree, new_degree, weights)
+
+
+def refine_curve(curve: BSplineCurve, inserted=(), degree: int | None = None) -> BSplineCurve:
+    """The same curve raised to ``degree`` (if higher) with the knots ``inserted`` added (as
+    :func:`refine_surface`)."""
+    new_degree = max(curve.degree, degree or curve.degree)
+    knots = _with_knots(curve.knots, curve.degree, new_degree, inserted)
+    if new_degree == curve.degree and len(knots) == len(curve.knots):
+        return curve
+    homo = refinement_matrix(curve.knots, curve.degree, knots, new_degree) @ _homogeneous(curve.poles, curve.weights)
+    return BSplineCurve(homo[:, :3] / homo[:, 3:], knots, new_degree, None if curve.weights is None else homo[:, 3])
+
+
 def insert_knots(surface: BSplineSurface, axis: int, knots) -> BSplineSurface:
     """The same surface with ``knots`` (each once) inserted in the u (``axis=0``) or v (``axis=1``) knot
-    vector: Boehm's algorithm on the homogeneous poles ``(w P, w)``, so rational surfaces keep their shape
-    exactly.  Refinement this way changes the control net, never the geometry.
+    vector: :func:`refine_surface` without a change of degree, after checking that ``axis`` is 0 or 1 and
+    every knot lies inside the domain (ValueError otherwise).
     """
     if axis not in (0, 1):
         raise ValueError(f"axis must be 0 (u) or 1 (v), got {axis!r}")
-    rational = surface.weights is not None
-    w = surface.weights if rational else np.ones(surface.shape)
-    homo = np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)     # (nu, nv, 4)
-    if axis == 1:
-        homo = homo.transpose(1, 0, 2)
-    flat = (surface.u_knots if axis == 0 else surface.v_knots).copy()
+    flat = surface.u_knots if axis == 0 else surface.v_knots
     p = surface.u_degree if axis == 0 else surface.v_degree
     lo, hi = flat[p], flat[len(flat) - p - 1]
     for x in np.sort(np.asarray(knots, float)):
         if not lo < x < hi:
             raise ValueError(f"knot {x} is not inside the domain ({lo}, {hi})")
-        k = int(np.searchsorted(flat, x, side="right")) - 1              # flat[k] <= x < flat[k + 1]
-        n = homo.shape[0]
-        new = np.empty((n + 1,) + homo.shape[1:])
-        new[:k - p + 1] = homo[:k - p + 1]
-        new[k + 1:] = homo[k:]
-        i = np.arange(k - p + 1, k + 1)
-        alpha = ((x - flat[i]) / (flat[i + p] - flat[i]))[:, None, None]
-        new[i] = alpha * homo[i] + (1.0 - alpha) * homo[i - 1]
-        homo = new
-        flat = np.insert(flat, k + 1, x)
-    if axis == 1:
-        homo = homo.transpose(1, 0, 2)
-    weights = homo[..., 3]
-    poles = homo[..., :3] / weights[..., None]
-    return BSplineSurface(poles, flat if axis == 0 else surface.u_knots, surface.v_knots if axis == 0 else flat,
-                          surface.u_degree, surface.v_degree, weights if rational else None)
+    return refine_surface(surface, axis, np.asarray(knots, float))
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -39,7 +39,6 @@ import shutil
 import subprocess
 import tempfile
 import time
-import uuid
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,11 +46,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FieldError
+from ..io.atomic import write_atomically
 from ..io.field import DisplacementField, match_points
 from .frd import HOT_TO_COLD_HEADING, FrdFile
 from .mesh import SolverError, TetMesh, mesh_step, step_bounding_box
 
 __all__ = ["Material", "TI6AL4V", "write_deck", "run_ccx", "read_hot_to_cold", "hot_to_cold_field",
+           "MeshOptions", "LoadCase", "SolverOptions",
            "blade_temperature",
            "hub_faces", "ROOM_TEMPERATURE", "ROTOR37_OMEGA"]
 
@@ -388,31 +389,94 @@ def hub_faces(mesh: TetMesh, axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 0.
 
 
 def _write_npz(field: DisplacementField, path: Path) -> None:
-    """Write ``points``, ``displacements``, ``node_ids`` compressed, atomically, under exactly ``path``."""
+    """Write ``points``, ``displacements``, ``node_ids`` compressed under exactly ``path``, whole or not at all
+    (:func:`hot2cold.io.atomic.write_atomically`: a failed write raises OutputError and leaves nothing)."""
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise FieldError(f"output folder does not exist: {folder}")
-    # A temporary name opened with open(): unlike mkstemp's 0600, the file gets the umask's permissions.
-    tmp = folder / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        with open(tmp, "xb") as fh:
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as fh:             # a file object: savez given a name would add ".npz" to it
             np.savez_compressed(fh, points=field.points, displacements=field.displacements,
                                 node_ids=field.node_ids)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    write_atomically([(path, write)])
 
 
-def hot_to_cold_field(step_path, out_path=None, *, size: float | None = None, min_size: float | None = None,
-                      curvature: float = 20, order: int = 2, material: Material = TI6AL4V,
-                      fixed_faces=None, fixed_nodes=None,
-                      hot_temperature: float | np.ndarray | Callable | None = None,
-                      room_temperature: float = ROOM_TEMPERATURE, omega: float = ROTOR37_OMEGA,
-                      axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 0.0, 1.0), nodes: str = "surface",
-                      work_dir=None, timeout: float = 3600.0, threads: int = 2,
-                      ccx: str = "ccx") -> DisplacementField:
+@dataclass(frozen=True)
+class MeshOptions:
+    """How :func:`hot_to_cold_field` meshes the hot part (see :func:`hot2cold.fe.mesh.mesh_step`).
+
+    Attributes
+    ----------
+    size : float or None, target element size, mm; default 1/40 of the part's bounding-box diagonal.
+    min_size : float or None, smallest element size, mm; default ``size / 10``.
+    curvature : float, elements per 2 pi of surface curvature.
+    degree : int, element degree: 2, second-order tetrahedra (CalculiX C3D10), or 1 (gmsh's ``order``).
+    """
+
+    size: float | None = None
+    min_size: float | None = None
+    curvature: float = 20
+    degree: int = 2
+
+
+@dataclass(frozen=True, eq=False)
+class LoadCase:
+    """The hot-to-cold load case of :func:`hot_to_cold_field` (cool down, stop rotating, root fixed).
+
+    Attributes
+    ----------
+    material : Material, default Ti-6Al-4V.
+    hot_temperature : float, (N,) array, callable or None
+        Running temperature, K: one value, per node, or a function of the node positions (N, 3) mm
+        returning (N,) K.  Default: :func:`blade_temperature`, 420 K at the hub to 480 K at the tip.
+    room_temperature : float, K, default 293.
+    omega : float, running speed, rad/s, default 1800 (Rotor 37); 0 for a part that does not rotate.
+    axis_point, axis_direction : the rotation axis (default the z axis), also the axis of the default
+        temperature and hub face.
+    fixed_faces : list of int or None
+        hot2cold faces (numbered from 0) whose nodes are fixed in x, y, z; default :func:`hub_faces` (the face
+        nearest the axis, a blade's root).  Ignored when ``fixed_nodes`` is given.
+    fixed_nodes : array-like or mapping or None
+        Node indices of the mesh to fix, as in :func:`write_deck` (needs the mesh in advance: rarely
+        useful here).
+    """
+
+    material: Material = TI6AL4V
+    hot_temperature: float | np.ndarray | Callable | None = None
+    room_temperature: float = ROOM_TEMPERATURE
+    omega: float = ROTOR37_OMEGA
+    axis_point: tuple = (0.0, 0.0, 0.0)
+    axis_direction: tuple = (0.0, 0.0, 1.0)
+    fixed_faces: list | None = None
+    fixed_nodes: object = None
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """How :func:`hot_to_cold_field` runs CalculiX.
+
+    Attributes
+    ----------
+    work_dir : str or os.PathLike or None
+        Folder for the deck and ccx's files, kept; default a temporary folder removed afterwards.
+    timeout, threads, ccx : see :func:`run_ccx`.
+    """
+
+    work_dir: str | os.PathLike | None = None
+    timeout: float = 3600.0
+    threads: int = 2
+    ccx: str = "ccx"
+
+
+def hot_to_cold_field(step_path, out_path=None, *, mesh: MeshOptions = MeshOptions(),
+                      load: LoadCase = LoadCase(), solver: SolverOptions = SolverOptions(),
+                      nodes: str = "surface") -> DisplacementField:
     """The whole FE pipeline: mesh the hot STEP, solve the hot-to-cold load case, return the field.
+
+    For example ``hot_to_cold_field("blade.step", "blade_field.npz", mesh=MeshOptions(size=1.5),
+    load=LoadCase(omega=1800.0))``.
 
     Parameters
     ----------
@@ -421,33 +485,15 @@ def hot_to_cold_field(step_path, out_path=None, *, size: float | None = None, mi
     out_path : str or os.PathLike or None
         Where to write the field as a compressed ``.npz`` (``points`` (N, 3) mm, ``displacements``
         (N, 3) mm, ``node_ids`` (N,) the CalculiX node numbers); ``None`` writes nothing.
-    size, min_size, curvature, order
-        Mesh controls, see :func:`hot2cold.fe.mesh.mesh_step`.  ``size`` defaults to 1/40 of the part's
-        bounding-box diagonal, ``min_size`` to ``size / 10``.
-    material : Material
-        Default Ti-6Al-4V.
-    fixed_faces : list of int or None
-        hot2cold faces (0-based) whose nodes are fixed in x, y, z; default :func:`hub_faces` (the face
-        nearest the axis, a blade's root).  Ignored when ``fixed_nodes`` is given.
-    fixed_nodes : array-like or mapping or None
-        Node indices of the mesh to fix, as in :func:`write_deck` (needs the mesh in advance: rarely
-        useful here).
-    hot_temperature : float, (N,) array, callable or None
-        Running temperature, K: one value, per node, or a function of the node positions (N, 3) mm
-        returning (N,) K.  Default: :func:`blade_temperature`, 420 K at the hub to 480 K at the tip.
-    room_temperature : float
-        K, default 293.
-    omega : float
-        Running speed, rad/s, default 1800 (Rotor 37); 0 for a part that does not rotate.
-    axis_point, axis_direction
-        The rotation axis (default the z axis), also the axis of the default temperature and hub face.
+    mesh : MeshOptions
+        Element size, smallest size, curvature and degree of the mesh.
+    load : LoadCase
+        Material, temperatures, speed and axis, fixed faces or nodes.
+    solver : SolverOptions
+        Work folder, timeout, threads and executable of CalculiX.
     nodes : str
         ``"surface"`` (default): the field holds the nodes on the part's faces, which are all the morph
         uses; ``"all"``: every node.
-    work_dir : str or os.PathLike or None
-        Folder for the deck and ccx's files, kept; default a temporary folder removed afterwards.
-    timeout, threads, ccx
-        See :func:`run_ccx`.
 
     Returns
     -------
@@ -458,53 +504,53 @@ def hot_to_cold_field(step_path, out_path=None, *, size: float | None = None, mi
     if nodes not in ("surface", "all"):
         raise ValueError(f"nodes must be 'surface' or 'all', got {nodes!r}")
     step_path = Path(os.fspath(step_path)).expanduser()
-    if size is None:
-        size = _default_size(step_path)
-    if min_size is None:
-        min_size = size / 10.0
+    size = _default_size(step_path) if mesh.size is None else mesh.size
+    min_size = size / 10.0 if mesh.min_size is None else mesh.min_size
     t0 = time.perf_counter()
-    mesh = mesh_step(step_path, size, min_size, curvature, order)
+    tets = mesh_step(step_path, size, min_size, mesh.curvature, mesh.degree)
     t_mesh = time.perf_counter() - t0
-    point, direction = _axis(axis_point, axis_direction)
+    point, direction = _axis(load.axis_point, load.axis_direction)
+    fixed_nodes = load.fixed_nodes
     if fixed_nodes is None:
-        faces = hub_faces(mesh, point, direction) if fixed_faces is None else [int(f) for f in fixed_faces]
+        faces = (hub_faces(tets, point, direction) if load.fixed_faces is None
+                 else [int(f) for f in load.fixed_faces])
         try:
-            fixed_nodes = np.unique(np.concatenate([mesh.face_nodes(f) for f in faces]))
+            fixed_nodes = np.unique(np.concatenate([tets.face_nodes(f) for f in faces]))
         except IndexError as exc:
             raise ValueError(f"fixed_faces: {exc}") from None
         log.info("fixing face(s) %s: %d nodes", faces, len(fixed_nodes))
-    if hot_temperature is None:
-        temps = blade_temperature(mesh.nodes, axis_point=point, axis_direction=direction)
-    elif callable(hot_temperature):
-        temps = np.asarray(hot_temperature(mesh.nodes), dtype=np.float64)
+    if load.hot_temperature is None:
+        temps = blade_temperature(tets.nodes, axis_point=point, axis_direction=direction)
+    elif callable(load.hot_temperature):
+        temps = np.asarray(load.hot_temperature(tets.nodes), dtype=np.float64)
     else:
-        temps = hot_temperature
+        temps = load.hot_temperature
 
     tmp = None
-    if work_dir is None:
+    if solver.work_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="hot2cold-ccx-")
         folder = Path(tmp.name)
     else:
-        folder = Path(os.fspath(work_dir)).expanduser()
+        folder = Path(os.fspath(solver.work_dir)).expanduser()
         folder.mkdir(parents=True, exist_ok=True)
     try:
-        deck = write_deck(mesh, folder / "hot2cold.inp", material=material, fixed_nodes=fixed_nodes,
-                          hot_temperature=temps, room_temperature=room_temperature, omega=omega,
+        deck = write_deck(tets, folder / "hot2cold.inp", material=load.material, fixed_nodes=fixed_nodes,
+                          hot_temperature=temps, room_temperature=load.room_temperature, omega=load.omega,
                           axis_point=point, axis_direction=direction)
         t1 = time.perf_counter()
-        frd = run_ccx(deck, timeout, threads=threads, ccx=ccx)
+        frd = run_ccx(deck, solver.timeout, threads=solver.threads, ccx=solver.ccx)
         t_ccx = time.perf_counter() - t1
-        full = read_hot_to_cold(frd, points_from=mesh)
+        full = read_hot_to_cold(frd, points_from=tets)
     finally:
         if tmp is not None:
             tmp.cleanup()
-    keep = mesh.boundary_nodes() if nodes == "surface" else np.arange(len(mesh.nodes))
+    keep = tets.boundary_nodes() if nodes == "surface" else np.arange(len(tets.nodes))
     order = np.argsort(full.node_ids)
-    index = order[np.searchsorted(full.node_ids, mesh.node_tags[keep], sorter=order)]
+    index = order[np.searchsorted(full.node_ids, tets.node_tags[keep], sorter=order)]
     field = DisplacementField(full.points[index], full.displacements[index], full.node_ids[index],
                               source=str(out_path) if out_path is not None else f"FE run on {step_path}")
     log.info("hot-to-cold field of %s: %d of %d nodes (%s), max |d| %.4g mm; mesh %.1f s, ccx %.1f s",
-             step_path, len(field), len(mesh.nodes), nodes,
+             step_path, len(field), len(tets.nodes), nodes,
              float(np.linalg.norm(field.displacements, axis=1).max()), t_mesh, t_ccx)
     if out_path is not None:
         _write_npz(field, Path(os.fspath(out_path)).expanduser())

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import Hot2ColdError, StepReadError
+from ..io.inputs import check_input_file
 
 __all__ = ["SolverError", "TetMesh", "mesh_step", "step_bounding_box", "GMSH_TET_TYPES"]
 
@@ -251,9 +252,7 @@ def mesh_step(step_path, size: float, min_size: float | None = None, curvature: 
     ValueError
         A size, the curvature or the order is out of range.
     """
-    path = Path(os.fspath(step_path)).expanduser()
-    if not path.is_file():
-        raise StepReadError(f"STEP file not found: {path}")
+    path = check_input_file(Path(os.fspath(step_path)).expanduser(), "STEP file", StepReadError)
     size = float(size)
     if not (np.isfinite(size) and size > 0):
         raise ValueError(f"size must be a positive number of mm, got {size!r}")
@@ -313,9 +312,7 @@ def _import_step(gmsh, path: Path) -> None:
 
 def step_bounding_box(step_path) -> np.ndarray:
     """The bounding box ``(2, 3)`` (min corner, max corner), mm, of a STEP file's shapes, read by gmsh."""
-    path = Path(os.fspath(step_path)).expanduser()
-    if not path.is_file():
-        raise StepReadError(f"STEP file not found: {path}")
+    path = check_input_file(Path(os.fspath(step_path)).expanduser(), "STEP file", StepReadError)
     with _session({}, {"Geometry.OCCTargetUnit": "MM"}) as gmsh:
         _import_step(gmsh, path)
         box = np.array(gmsh.model.getBoundingBox(-1, -1), dtype=np.float64).reshape(2, 3)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.bspline import evaluate_surface
+from ..core.bspline import clip_uv, evaluate_surface
 from .atomic import write_atomically
 
 log = logging.getLogger(__name__)
@@ -57,9 +57,26 @@ class ColdSurface:
     displacement: np.ndarray
 
 
+def points_on_faces(surfaces: list, mesh) -> np.ndarray:
+    """Each vertex of a triangle ``mesh`` (:class:`hot2cold.kernel.tessellate.TriangleMesh`) at its ``(u, v)``
+    on the surface of its face: ``(n, 3)``, with ``surfaces`` one BSplineSurface per face (the hot ones, the
+    cold ones: the morph keeps each face's parameterisation, so one mesh's ``(u, v)`` serve both).  The
+    parameters are clipped to the surface's domain; rows are NaN where a vertex has no ``(u, v)`` or is in
+    no triangle."""
+    vertex_face = np.full(len(mesh.vertices), -1)
+    vertex_face[mesh.triangles] = mesh.face[:, None]
+    points = np.full(mesh.vertices.shape, np.nan)
+    for k in np.unique(mesh.face):
+        idx = np.flatnonzero((vertex_face == k) & np.isfinite(mesh.uv).all(axis=1))
+        if len(idx):
+            uv = clip_uv(surfaces[k], mesh.uv[idx])
+            points[idx] = evaluate_surface(surfaces[k], uv[:, 0], uv[:, 1])
+    return points
+
+
 def cold_surface(result, deflection: float | None = None) -> ColdSurface:
     """Triangulate the cold part of a :class:`~hot2cold.morph.MorphResult` and give each vertex the
-    displacement of its ``(u, v)`` from the hot surface to the cold one.
+    displacement of its ``(u, v)`` from the hot surface to the cold one (:func:`points_on_faces`).
 
     ``deflection``: largest distance (mm) between a triangle and its face (default 1e-3 of the part's
     bounding-box diagonal).
@@ -67,15 +84,8 @@ def cold_surface(result, deflection: float | None = None) -> ColdSurface:
     from ..kernel.tessellate import tessellate
 
     mesh = tessellate(result.cold.wrapped, deflection)
-    vertex_face = np.full(len(mesh.vertices), -1)
-    vertex_face[mesh.triangles] = mesh.face[:, None]
-    displacement = np.full(mesh.vertices.shape, np.nan)
-    for k in np.unique(mesh.face):
-        idx = np.flatnonzero((vertex_face == k) & np.isfinite(mesh.uv).all(axis=1))
-        if len(idx):
-            u, v = mesh.uv[idx, 0], mesh.uv[idx, 1]
-            displacement[idx] = (evaluate_surface(result.faces[k].surface, u, v)
-                                 - evaluate_surface(result.part.faces[k].surface, u, v))
+    displacement = (points_on_faces([fm.surface for fm in result.faces], mesh)
+                    - points_on_faces([face.surface for face in result.part.faces], mesh))
     return ColdSurface(mesh.vertices, mesh.triangles, mesh.face, mesh.uv, displacement)
 
 

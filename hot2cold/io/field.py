@@ -58,6 +58,8 @@ import numpy as np
 
 from hot2cold.errors import FieldError
 
+from .inputs import read_input_bytes
+
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
            "as_field", "match_points", "merge_duplicates", "DUPLICATE_RTOL", "DUPLICATE_DISPLACEMENT_RTOL"]
 
@@ -227,7 +229,7 @@ def read_field(path, units: str = "mm", field_name: str | None = None, *, points
     if isinstance(fspath, bytes):
         fspath = os.fsdecode(fspath)
     fspath = os.path.expanduser(fspath)
-    raw = _read_bytes(fspath)
+    raw = read_input_bytes(fspath, "field file", FieldError)
     kind = _kind(fspath, raw)
     if kind != "frd" and (points_from is not None or step is not None):
         raise FieldError(
@@ -355,21 +357,6 @@ def _unit_factor(units) -> float:
     if key not in UNITS:
         raise FieldError(f"unknown units {units!r} for the field: use one of {', '.join(map(repr, UNITS))}")
     return UNITS[key]
-
-
-def _read_bytes(path: str) -> bytes:
-    try:
-        with open(path, "rb") as fh:
-            return fh.read()
-    except FileNotFoundError:
-        raise FieldError(f"field file not found: {path}; check the path") from None
-    except IsADirectoryError:
-        raise FieldError(
-            f"field path is a directory, not a file: {path}; give the field file itself") from None
-    except PermissionError:
-        raise FieldError(f"cannot read field file {path}: permission denied; check its permissions") from None
-    except OSError as exc:
-        raise FieldError(f"cannot read field file {path}: {_one_line(exc)}") from None
 
 
 def _parse_npz(path: str, field_name: str | None = None) -> DisplacementField:

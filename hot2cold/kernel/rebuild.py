@@ -32,7 +32,11 @@ def _insert_missing(flat: list, knots, insert) -> None:
 
 
 def _refine_surface(surface, record: BSplineSurface) -> None:
-    """Give the kernel surface the degrees and knots of a refined record (its shape unchanged)."""
+    """Give the kernel surface the degrees and knots of a record refined by
+    :func:`hot2cold.core.bspline.refine_surface` (the one refinement; the poles the kernel computes here are
+    overwritten by the record's).  Done in place, by the kernel's IncreaseDegree and InsertUKnot/InsertVKnot,
+    because a Geom_BSplineSurface has no setter for its knots and a new surface object would lose the edges'
+    curves on the face, which the kernel finds by the face's surface handle."""
     if record.u_degree > surface.UDegree() or record.v_degree > surface.VDegree():
         surface.IncreaseDegree(max(record.u_degree, surface.UDegree()), max(record.v_degree, surface.VDegree()))
     _insert_missing(surface.UKnotSequence(), record.u_knots, surface.InsertUKnot)
@@ -40,7 +44,8 @@ def _refine_surface(surface, record: BSplineSurface) -> None:
 
 
 def _refine_curve(curve, record: BSplineCurve) -> None:
-    """Give the kernel curve the degree and knots of a refined record (its shape unchanged)."""
+    """Give the kernel curve the degree and knots of a record refined by :func:`hot2cold.core.bspline.refine_curve`
+    (in place, as :func:`_refine_surface`; the record's poles are written afterwards)."""
     if record.degree > curve.Degree():
         curve.IncreaseDegree(record.degree)
     _insert_missing(curve.KnotSequence(), record.knots, curve.InsertKnot)

@@ -15,19 +15,16 @@ from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS_Shape
 
 from ..io.atomic import write_atomically
+from ..io.inputs import check_input_file
 from ..errors import KernelError, StepReadError
 
 log = logging.getLogger(__name__)
 
 
 def check_step_file(path: str | os.PathLike) -> Path:
-    """``path`` as a Path; :class:`StepReadError` when the file is missing or empty."""
-    path = Path(path)
-    if not path.is_file():
-        raise StepReadError(f"STEP file not found: {path}")
-    if path.stat().st_size == 0:
-        raise StepReadError(f"STEP file is empty: {path}")
-    return path
+    """``path`` as a Path; :class:`StepReadError` when the file is missing, a folder, not readable or empty
+    (:func:`hot2cold.io.inputs.check_input_file`)."""
+    return check_input_file(Path(path), "STEP file", StepReadError, empty=True)
 
 
 def check_step_shape(shape: TopoDS_Shape, path: Path) -> TopoDS_Shape:

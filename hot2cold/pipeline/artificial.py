@@ -10,7 +10,7 @@ polynomials over foot points around it instead:
   does, but it does not depend on which three points are nearest (three nearly collinear foot points make
   the paper's triangle degenerate and its extrapolation explode), and it averages the noise of many nodes;
 * a quadratic correction, weighted by how well the quadratic terms describe the field over the neighbourhood
-  (:func:`_local_fits`).  A smooth field (thermal strain, an untwist, a span-wise stretch) is nearly quadratic
+  (:func:`hot2cold.core.localfit.fits_at`).  A smooth field (thermal strain, an untwist, a span-wise stretch) is nearly quadratic
   at the scale of a part, and the linear fit alone misses its curvature: on Rotor 37 with an untwist field
   it was 1e-3 mm off at the artificial nodes 2 to 3 mm beyond the aerofoil faces' trims, the quadratic one
   2e-6 mm.  A real FE field need not be (Rotor 37's CalculiX field, clamped at the hub, is not), and there
@@ -30,86 +30,19 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.localfit import fits_at
+
 #: A point whose nearest foot point is ``rho`` away fits its quadratic over the foot points within
 #: ``REACH * rho`` and its linear fit over those within ``LINEAR_REACH * rho``, when that ball holds more than
 #: its ``k`` nearest ones.
 REACH, LINEAR_REACH = 3.0, 1.5
 #: Most foot points in one wide fit; a larger ball is thinned to a random subset of about this size.
 MAX_NEIGHBOURS = 100
-#: Quadratic terms of the local fit: products of the coordinate offsets (x x, y y, z z, x y, x z, y z).
-_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 #: Fewest neighbours for a quadratic fit (10 coefficients); with fewer the fit is linear (4 coefficients).
 _QUADRATIC_MIN = 10
-#: Relative cut-off of the singular values of the quadratic part of a local fit (see :func:`_local_fits`).
-QUADRATIC_RCOND = 1e-3
-#: The quadratic terms count in full where they leave less than ``TRUSTED`` of what the linear fit leaves over
-#: the neighbourhood (relative rms), not at all where they leave more than ``UNTRUSTED``; in between their
-#: weight falls linearly in the logarithm (see :func:`_local_fits`).
-TRUSTED, UNTRUSTED = 0.01, 0.1
 #: k-d trees split at the sliding midpoint and keep their nodes' boxes as split: with a million foot points
 #: they build in a third of the time of the default (median splits, shrunk boxes), and queries are as fast.
 _TREE = {"balanced_tree": False, "compact_nodes": False}
-
-
-def _monomials(offsets: np.ndarray, quadratic: bool) -> np.ndarray:
-    """Columns ``(..., 4)`` or ``(..., 10)`` of the local polynomial at offsets ``(..., 3)``."""
-    cols = [np.ones(offsets.shape[:-1] + (1,)), offsets]
-    if quadratic:
-        cols.append(np.stack([offsets[..., a] * offsets[..., b] for a, b in _PAIRS], axis=-1))
-    return np.concatenate(cols, axis=-1)
-
-
-def _local_fits(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.ndarray,
-                quadratic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares polynomials over the neighbourhoods ``points (c, m, 3)`` with ``values (c, m, 3)``, rows
-    where ``valid (c, m)`` is False left out, at ``x (c, 3)``: the linear fit's value ``(c, 3)``, the quadratic
-    correction to it ``(c, 3)`` (zero if not ``quadratic``) and the trust ``(c,)`` in 0..1 of that correction.
-
-    Offsets are taken from each neighbourhood's centroid and scaled to at most 1.  The linear part is fitted
-    first, by the pseudo-inverse (batched SVD): foot points on a plane make it rank-deficient, and the
-    pseudo-inverse then gives no gradient across the plane.  The quadratic terms, made orthogonal to the
-    linear ones, then fit what the linear part leaves (together the two steps are the least-squares quadratic,
-    Frisch-Waugh-Lovell), with their own cut-off ``QUADRATIC_RCOND``: foot points along a curve or on a nearly
-    flat patch leave some quadratic combinations barely determined, and those are dropped rather than fitted to
-    rounding.  An affine field leaves nothing to the quadratic terms, so it is reproduced exactly.
-
-    The quadratic correction is trusted only as far as the field is quadratic over the neighbourhood: the
-    trust is 1 where the quadratic terms leave less than ``TRUSTED`` of the linear fit's residual (rms), 0
-    where they leave more than ``UNTRUSTED``.  Smooth analytic fields (an untwist, a stretch, bending) leave
-    less than 0.3 % over the neighbourhoods of the parts' artificial nodes; the CalculiX field of Rotor 37,
-    whose hub is clamped, leaves 5 to 90 %: extrapolated 10 to 25 mm over the hub's trimmed-away part, its
-    quadratic terms gave displacements of 0.1 to 0.5 mm where the hub and every node on it stay put.
-    """
-    w = valid[..., None].astype(float)
-    count = np.maximum(valid.sum(axis=1), 1)[:, None]
-    centre = (points * w).sum(axis=1) / count
-    offsets = (points - centre[:, None, :]) * w
-    scale = np.abs(offsets).max(axis=(1, 2))
-    scale[scale == 0] = 1.0
-    offsets = offsets / scale[:, None, None]
-    at = (x - centre) / scale[:, None]
-    values = values * w
-    linear = _monomials(offsets, False) * w                                     # (c, m, 4)
-    linear_pinv = np.linalg.pinv(linear, rcond=1e-10)                           # (c, 4, m)
-    coef = linear_pinv @ values                                                 # (c, 4, 3)
-    at_linear = _monomials(at, False)                                           # (c, 4)
-    out = np.einsum("ct,ctj->cj", at_linear, coef)
-    if not quadratic:
-        return out, np.zeros_like(out), np.zeros(len(out))
-    square = np.stack([offsets[..., a] * offsets[..., b] for a, b in _PAIRS], axis=-1)        # (c, m, 6)
-    carried = linear_pinv @ square                                              # (c, 4, 6)
-    square = square - linear @ carried                                          # orthogonal to the linear part
-    at_square = np.stack([at[..., a] * at[..., b] for a, b in _PAIRS], axis=-1)
-    at_square = at_square - np.einsum("ct,cts->cs", at_linear, carried)
-    residual = values - linear @ coef                                           # (c, m, 3)
-    u, sigma, vt = np.linalg.svd(square, full_matrices=False)                   # (c, m, 6), (c, 6), (c, 6, 6)
-    keep = sigma > QUADRATIC_RCOND * sigma[:, :1]
-    gain = np.where(keep, np.einsum("cs,cjs->cj", at_square, vt) / np.where(keep, sigma, 1.0), 0.0)   # (c, 6)
-    projected = np.einsum("cmj,cmk->cjk", u, residual) * keep[..., None]        # (c, 6, 3)
-    before = (residual ** 2).sum(axis=(1, 2))
-    left = np.sqrt(np.maximum(before - (projected ** 2).sum(axis=(1, 2)), 0.0) / np.maximum(before, 1e-300))
-    trust = np.clip(np.log(UNTRUSTED / np.maximum(left, 1e-300)) / np.log(UNTRUSTED / TRUSTED), 0.0, 1.0)
-    return out, np.einsum("cj,cjk->ck", gain, projected), trust
 
 
 class FieldEstimator:
@@ -193,17 +126,17 @@ class FieldEstimator:
         for start in range(0, len(x), chunk):
             xs = x[start:start + chunk]
             dist, idx = self._tree.query(xs, k=self._k)
-            linear, correction, trust = _local_fits(self._points[idx], self._disp[idx], np.ones(idx.shape, bool), xs,
+            linear, correction, trust = fits_at(self._points[idx], self._disp[idx], np.ones(idx.shape, bool), xs,
                                                     self._quadratic)
             quadratic = linear + correction
             far = np.nonzero(LINEAR_REACH * dist[:, 0] > dist[:, -1])[0]
             if len(far):
                 wide, valid = self._wide(xs[far], LINEAR_REACH * dist[far, 0])
-                linear[far] = _local_fits(self._points[wide], self._disp[wide], valid, xs[far], False)[0]
+                linear[far] = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False)[0]
             far = np.nonzero(REACH * dist[:, 0] > dist[:, -1])[0]
             if self._quadratic and len(far):
                 wide, valid = self._wide(xs[far], REACH * dist[far, 0])
-                base, correction, trust[far] = _local_fits(self._points[wide], self._disp[wide], valid, xs[far], True)
+                base, correction, trust[far] = fits_at(self._points[wide], self._disp[wide], valid, xs[far], True)
                 quadratic[far] = base + correction
             out[start:start + chunk] = linear + trust[:, None] * (quadratic - linear)
         return out

@@ -9,7 +9,7 @@ displacement ``d`` at a hot point ``X`` is the one whose cold point ``X + d`` is
 
 solved node by node by the fixed-point iteration ``d_(k+1) = -u(X + d_k)`` from ``d_0 = -u(X)``.  Near
 each node ``u`` is a quadratic (or, where the nodes do not determine one, linear) least-squares fit over
-its nearest nodes, fixed once per node: an
+its nearest nodes (:func:`hot2cold.core.localfit.node_fits`), fixed once per node: an
 interpolant whose neighbour set changed as ``X + d`` moves would jump by the fit error and stall the
 iteration at that level.  The iteration contracts as long as the displacement gradient is small
 (``|grad u| < 1``, always so for elastic and thermal strain); the residual ``max |d + u(X + d)|`` is
@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scipy.spatial import cKDTree
-
+from ..core.localfit import evaluate_node_fits, node_fits
 from ..errors import FieldError
 from ..io.field import DisplacementField
 
@@ -45,45 +44,6 @@ class Inversion:
     converged: bool
 
 
-def _features(offsets: np.ndarray) -> np.ndarray:
-    """Quadratic monomials ``(..., 10)`` of offsets ``(..., 3)``: 1, x, y, z, x², y², z², xy, xz, yz."""
-    x, y, z = offsets[..., 0], offsets[..., 1], offsets[..., 2]
-    return np.stack([np.ones_like(x), x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=-1)
-
-
-def _local_quadratics(points: np.ndarray, values: np.ndarray, neighbours: int,
-                      chunk: int = 4096, rcond: float = 1e-8) -> tuple[np.ndarray, np.ndarray]:
-    """Per node, the coefficients ``(N, 10, 3)`` of a least-squares fit of ``values`` over its nearest
-    nodes, in offsets scaled by ``scale (N,)``.
-
-    The fit is quadratic where the neighbours determine a quadratic (three or more layers in every
-    direction), else linear (quadratic coefficients zero): a minimum-norm quadratic fit over two layers of
-    nodes would share the normal derivative between the linear and the quadratic term and get it wrong.
-    """
-    k = min(neighbours, len(points))
-    tree = cKDTree(points)
-    coef = np.zeros((len(points), 10, 3))
-    scale = np.ones(len(points))
-    for start in range(0, len(points), chunk):
-        xs = points[start:start + chunk]
-        _, idx = tree.query(xs, k=k)
-        idx = idx.reshape(len(xs), k)
-        offsets = points[idx] - xs[:, None, :]
-        s = np.abs(offsets).max(axis=(1, 2))
-        s[s == 0] = 1.0
-        features = _features(offsets / s[:, None, None])
-        sigma = np.linalg.svd(features, compute_uv=False)
-        quadratic = sigma[:, -1] > rcond * sigma[:, 0]
-        block = np.zeros((len(xs), 10, 3))
-        if quadratic.any():
-            block[quadratic] = np.linalg.pinv(features[quadratic]) @ values[idx[quadratic]]
-        if (~quadratic).any():
-            block[~quadratic, :4] = np.linalg.pinv(features[~quadratic, :, :4], rcond=1e-10) @ values[idx[~quadratic]]
-        coef[start:start + chunk] = block
-        scale[start:start + chunk] = s
-    return coef, scale
-
-
 def invert_field(field: DisplacementField, tolerance: float = 1e-9, max_iterations: int = 50,
                  neighbours: int = 30) -> tuple[DisplacementField, Inversion]:
     """The hot-to-cold field at the nodes of a cold-to-hot ``field`` (see the module docstring).
@@ -91,10 +51,10 @@ def invert_field(field: DisplacementField, tolerance: float = 1e-9, max_iteratio
     Raises :class:`FieldError` when the iteration does not converge (change above ``tolerance`` mm after
     ``max_iterations``, or growing): the field is then too large or too rough to invert.
     """
-    coef, scale = _local_quadratics(field.points, field.displacements, neighbours)
+    coef, scale = node_fits(field.points, field.displacements, neighbours)
 
     def u(offset: np.ndarray) -> np.ndarray:        # u(X + offset) for every node, (N, 3)
-        return np.einsum("nf,nfc->nc", _features(offset / scale[:, None]), coef)
+        return evaluate_node_fits(coef, scale, offset)
 
     d = -field.displacements.copy()
     history = []

@@ -35,8 +35,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis, evaluate_curve,
-                      evaluate_surface, surface_derivatives)
+from ..core.bspline import (BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve,
+                            evaluate_surface, refine_curve, refine_surface, surface_derivatives)
 from .classify import EDGE, FACE, Classification
 from .edge_fit import EdgeMorph
 from .face_fit import SIDES, FaceMorph, _side_of
@@ -105,72 +105,6 @@ class RefineResult:
     face_refinements: list[Refinement]
     edge_refinements: list[EdgeRefinement]
     rounds: int
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Refinement operators: knot insertion and degree elevation, exact to rounding.
-# ----------------------------------------------------------------------------------------------------------
-
-def _basis(knots: np.ndarray, degree: int, t: np.ndarray) -> np.ndarray:
-    n = len(knots) - degree - 1
-    return curve_basis(BSplineCurve(np.zeros((n, 3)), knots, degree), t).toarray()
-
-
-def refinement_matrix(old_knots, old_degree: int, new_knots, new_degree: int) -> np.ndarray:
-    """The matrix ``T (n_new, n_old)`` taking B-spline coefficients on ``(old_knots, old_degree)`` to the
-    same function on ``(new_knots, new_degree)``, which must hold the old spline space (inserted knots,
-    raised degree with every knot's multiplicity raised as much).  Found by collocation at the Greville
-    points of the new knots, where the new basis matrix is non-singular (Schoenberg-Whitney)."""
-    new_knots = np.asarray(new_knots, float)
-    n_new = len(new_knots) - new_degree - 1
-    tau = np.array([new_knots[j + 1:j + new_degree + 1].mean() for j in range(n_new)])
-    old = _basis(np.asarray(old_knots, float), old_degree, tau)
-    return np.linalg.solve(_basis(new_knots, new_degree, tau), old)
-
-
-def elevated_knots(knots, degree: int, new_degree: int) -> np.ndarray:
-    """The knot vector of the degree-``new_degree`` space holding the degree-``degree`` splines on ``knots``:
-    every distinct knot's multiplicity raised by ``new_degree - degree``."""
-    values, counts = np.unique(np.asarray(knots, float), return_counts=True)
-    return np.repeat(values, counts + max(new_degree - degree, 0))
-
-
-def _homogeneous(poles: np.ndarray, weights: np.ndarray | None) -> np.ndarray:
-    w = np.ones(poles.shape[:-1]) if weights is None else weights
-    return np.concatenate([poles * w[..., None], w[..., None]], axis=-1)
-
-
-def _with_knots(knots: np.ndarray, degree: int, new_degree: int, inserted) -> np.ndarray:
-    return np.sort(np.concatenate([elevated_knots(knots, degree, new_degree), np.asarray(inserted, float)]))
-
-
-def refine_surface(surface: BSplineSurface, axis: int, inserted=(), degree: int | None = None) -> BSplineSurface:
-    """The same surface with its u (``axis`` 0) or v (1) direction raised to ``degree`` (if higher) and the
-    knots ``inserted`` added; rational surfaces are refined in homogeneous coordinates."""
-    old_knots = surface.u_knots if axis == 0 else surface.v_knots
-    old_degree = surface.u_degree if axis == 0 else surface.v_degree
-    new_degree = max(old_degree, degree or old_degree)
-    knots = _with_knots(old_knots, old_degree, new_degree, inserted)
-    if new_degree == old_degree and len(knots) == len(old_knots):
-        return surface
-    t = refinement_matrix(old_knots, old_degree, knots, new_degree)
-    homo = _homogeneous(surface.poles, surface.weights)
-    homo = np.einsum("ij,jkl->ikl", t, homo) if axis == 0 else np.einsum("kj,ijl->ikl", t, homo)
-    w = homo[..., 3]
-    poles, weights = homo[..., :3] / w[..., None], (None if surface.weights is None else w)
-    if axis == 0:
-        return BSplineSurface(poles, knots, surface.v_knots, new_degree, surface.v_degree, weights)
-    return BSplineSurface(poles, surface.u_knots, knots, surface.u_degree, new_degree, weights)
-
-
-def refine_curve(curve: BSplineCurve, inserted=(), degree: int | None = None) -> BSplineCurve:
-    """The same curve raised to ``degree`` (if higher) with the knots ``inserted`` added."""
-    new_degree = max(curve.degree, degree or curve.degree)
-    knots = _with_knots(curve.knots, curve.degree, new_degree, inserted)
-    if new_degree == curve.degree and len(knots) == len(curve.knots):
-        return curve
-    homo = refinement_matrix(curve.knots, curve.degree, knots, new_degree) @ _homogeneous(curve.poles, curve.weights)
-    return BSplineCurve(homo[:, :3] / homo[:, 3:], knots, new_degree, None if curve.weights is None else homo[:, 3])
 
 
 # ----------------------------------------------------------------------------------------------------------

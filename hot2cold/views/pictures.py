@@ -29,7 +29,9 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter
 
-from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, mean_curvature, surface_derivatives
+from ..core.bspline import (BSplineSurface, clip_uv, evaluate_curve, mean_curvature,
+                            surface_derivatives)
+from ..io.export import points_on_faces
 from ..pipeline.classify import EDGE, FACE
 from ..kernel.tessellate import TriangleMesh, tessellate
 
@@ -69,11 +71,6 @@ def _png(fig: Figure, dpi: int) -> bytes:
     return buf.getvalue()
 
 
-def _clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
-    u0, u1, v0, v1 = surface.domain
-    return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
-
-
 def check_scale(scale: float) -> float:
     """``scale`` as a float; ValueError unless it is a positive finite number."""
     scale = float(scale)
@@ -90,13 +87,11 @@ def _face_vertices(mesh: TriangleMesh, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cold_vertices(result, mesh: TriangleMesh) -> np.ndarray:
-    """Each mesh vertex moved onto the cold part: ``S_cold(u, v)`` of its face (same parameters as hot)."""
-    cold = mesh.vertices.copy()
-    for k, fm in enumerate(result.faces):
-        verts, _ = _face_vertices(mesh, k)
-        if len(verts):
-            uv = _clip_uv(fm.surface, mesh.uv[verts])
-            cold[verts] = evaluate_surface(fm.surface, uv[:, 0], uv[:, 1])
+    """Each mesh vertex moved onto the cold part: ``S_cold(u, v)`` of its face (same parameters as hot,
+    :func:`hot2cold.io.export.points_on_faces`); a vertex without ``(u, v)`` or triangle stays where it is."""
+    cold = points_on_faces([fm.surface for fm in result.faces], mesh)
+    missing = np.isnan(cold).any(axis=1)
+    cold[missing] = mesh.vertices[missing]
     return cold
 
 
@@ -331,7 +326,7 @@ def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh
     for ax, k in zip(axes, faces):
         surface = result.part.faces[k].surface
         verts, tris = _face_vertices(mesh, k)
-        dev = _Developed.of(surface, _clip_uv(surface, mesh.uv[verts]))
+        dev = _Developed.of(surface, clip_uv(surface, mesh.uv[verts]))
         xy = dev.xy(mesh.uv[verts])
         ax.add_collection(PolyCollection(xy[tris], facecolors="0.9", edgecolors="0.9", linewidths=0.3))
         face_nodes = cls.nodes_of(FACE, k)
@@ -413,7 +408,7 @@ def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray
     mesh's triangles face outward)."""
     p = mesh.vertices[verts][tris]
     outward = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    uv = _clip_uv(surface, mesh.uv[verts][tris].mean(axis=1))
+    uv = clip_uv(surface, mesh.uv[verts][tris].mean(axis=1))
     su, sv = surface_derivatives(surface, uv[:, 0], uv[:, 1])
     return 1.0 if np.nansum(np.einsum("ij,ij->i", np.cross(su, sv), outward)) >= 0 else -1.0
 
@@ -455,7 +450,7 @@ def face_curvature(result, k: int, mesh: TriangleMesh | None = None, grid_points
     verts, tris = _face_vertices(mesh, k)
     if not len(verts):
         raise ValueError(f"face {k} has no triangles")
-    uv0 = _clip_uv(hot_s, mesh.uv[verts])
+    uv0 = clip_uv(hot_s, mesh.uv[verts])
     dev = _Developed.of(hot_s, uv0)
     xy = dev.xy(uv0)
     ext = np.maximum(np.ptp(xy, axis=0), 1e-12)
@@ -470,7 +465,7 @@ def face_curvature(result, k: int, mesh: TriangleMesh | None = None, grid_points
     gy = np.linspace(xy[:, 1].min(), xy[:, 1].min() + ext[1], ny)
     inside = _inside_mask(xy, tris, gx, gy)
     px, py = np.meshgrid(gx, gy)
-    uv = _clip_uv(hot_s, dev.uv(np.column_stack([px[inside], py[inside]])))
+    uv = clip_uv(hot_s, dev.uv(np.column_stack([px[inside], py[inside]])))
     sign = -_outward_sign(hot_s, mesh, verts, tris)                 # convex positive
     values = []
     for surf in (hot_s, cold_s):
