@@ -73,7 +73,8 @@ def peak_mb() -> float:
 
 def direct(part, points: np.ndarray, node_distance: float):
     """The direct approach: ``(owner (n,), distance (n,), uv (n, 2))`` of the nearest inside foot point."""
-    from hot2cold.kernel.project import OUTSIDE, Projector
+    from hot2cold.core.domain import Trim
+    from hot2cold.kernel.project import Projector
 
     projector = Projector(part.kernel.faces, part.kernel.edges)
     best = np.full(len(points), np.inf)
@@ -81,7 +82,7 @@ def direct(part, points: np.ndarray, node_distance: float):
     uv = np.full((len(points), 2), np.nan)
     for face in part.faces:
         f_uv, f_dist = projector.to_face(face.index, points)
-        inside = projector.classify_exactly(face.index, f_uv) != OUTSIDE
+        inside = projector.classify_exactly(face.index, f_uv) != Trim.OUTSIDE
         better = inside & (f_dist <= node_distance) & (f_dist < best)
         best[better], owner[better], uv[better] = f_dist[better], face.index, f_uv[better]
     return owner, best, uv
@@ -89,10 +90,10 @@ def direct(part, points: np.ndarray, node_distance: float):
 
 def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict:
     """Node-by-node comparison of the classification with the direct approach."""
-    from hot2cold.pipeline.classify import EDGE, FACE, VERTEX
+    from hot2cold.core.model import Role
 
     part, cls = result.part, result.classification
-    face = cls.role == FACE
+    face = cls.role == Role.FACE
     size = np.array([f.uv_box[[1, 3]] - f.uv_box[[0, 2]] for f in part.faces])
     same_face = cls.owner[face] == owner[face]
     both = np.flatnonzero(face)[same_face]
@@ -101,8 +102,8 @@ def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict
     for e in part.edges:
         for v in e.vertices:
             faces_of_vertex[v] |= set(e.faces)
-    boundary_ok = all(owner[i] in (faces_of_edge if cls.role[i] == EDGE else faces_of_vertex)[cls.owner[i]]
-                      for i in np.flatnonzero((cls.role == EDGE) | (cls.role == VERTEX)))
+    boundary_ok = all(owner[i] in (faces_of_edge if cls.role[i] == Role.EDGE else faces_of_vertex)[cls.owner[i]]
+                      for i in np.flatnonzero((cls.role == Role.EDGE) | (cls.role == Role.VERTEX)))
     return {
         "face_nodes": int(face.sum()),
         "other_face": int((~same_face).sum()),

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 
 from hot2cold.io import export
 from hot2cold.errors import OutputError
-from hot2cold.pipeline.classify import IGNORED
+from hot2cold.core.model import Role
 from hot2cold.cli.commands import _Progress, main
 from hot2cold.testing.synthetic import AffineField
 
@@ -45,7 +45,7 @@ def test_vtu_nodes_read_back_with_the_result_arrays(blade, blade_surface, tmp_pa
     np.testing.assert_array_equal(m.point_data["role"], blade.classification.role)
     np.testing.assert_array_equal(m.point_data["owner"], blade.classification.owner)
     np.testing.assert_array_equal(m.point_data["node_id"], blade.field.node_ids)
-    ignored = m.point_data["role"] == IGNORED
+    ignored = m.point_data["role"] == Role.IGNORED
     assert ignored.sum() == blade.report.nodes_ignored == 500
     assert np.isnan(m.point_data["error"][ignored]).all() and np.isfinite(m.point_data["error"][~ignored]).all()
     assert np.nanmax(m.point_data["error"]) == pytest.approx(blade.report.delta_max, rel=1e-12)
@@ -66,7 +66,7 @@ def test_vtu_surface_has_faces_and_the_hot_to_cold_displacement(blade, blade_sur
     np.testing.assert_array_equal(d, blade_surface.displacement)
     # Independent of the fit: each vertex's hot position (cold vertex - displacement) takes about the FE
     # displacement of the nearest used node, within the field's own variation over that distance.
-    used = blade.classification.role != IGNORED
+    used = blade.classification.role != Role.IGNORED
     points, disp = blade.field.points[used], blade.field.displacements[used]
     tree = cKDTree(points)
     step, pair = tree.query(points, k=2)

@@ -15,11 +15,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 from hot2cold.core.bspline import evaluate_surface, surface_normals
-from hot2cold.pipeline.classify import FACE, classify_nodes, start_grid
-from hot2cold.core.domain import INSIDE, OUTSIDE, UNSURE, DomainRaster
+from hot2cold.pipeline.classify import classify_nodes, start_grid
+from hot2cold.core.domain import DomainRaster, Trim
 from hot2cold.io.field import as_field
 from hot2cold.core.footpoint import project_to_surface
-from hot2cold.kernel.project import OUTSIDE as KERNEL_OUTSIDE
+from hot2cold.core.model import Role
 from hot2cold.kernel.project import Projector
 from hot2cold.pipeline.load import load_part
 from hot2cold.settings import Settings
@@ -100,15 +100,15 @@ def test_raster_of_a_square_with_a_hole():
     state = raster.classify(uv)
     radius = np.linalg.norm(uv - 0.5, axis=1)
     truly_inside = np.all((uv > 0) & (uv < 1), axis=1) & (radius > 0.2)
-    decided = state != UNSURE
-    assert np.all((state[decided] == INSIDE) == truly_inside[decided])
+    decided = state != Trim.UNSURE
+    assert np.all((state[decided] == Trim.INSIDE) == truly_inside[decided])
     in_square = np.all((uv >= 0) & (uv <= 1), axis=1)
     to_square = np.where(in_square, np.min(np.concatenate([uv, 1 - uv], axis=1), axis=1),
                          np.linalg.norm(np.maximum(np.maximum(-uv, uv - 1), 0), axis=1))
     to_boundary = np.minimum(np.abs(radius - 0.2), to_square)
-    assert np.all(state[to_boundary < 1.0 / 256] == UNSURE)
+    assert np.all(state[to_boundary < 1.0 / 256] == Trim.UNSURE)
     assert decided.mean() > 0.95
-    assert np.all(raster.classify(np.array([[np.nan, 0.5], [2.0, 0.5]])) == OUTSIDE)
+    assert np.all(raster.classify(np.array([[np.nan, 0.5], [2.0, 0.5]])) == Trim.OUTSIDE)
 
 
 def test_classify_matches_fclass2d(part):
@@ -145,10 +145,10 @@ def test_classification_matches_direct_projection():
     uv = np.full((len(pick), 2), np.nan)
     for face in part.faces:
         f_uv, f_dist = projector.to_face(face.index, field.points)
-        inside = projector.classify_exactly(face.index, f_uv) != KERNEL_OUTSIDE
+        inside = projector.classify_exactly(face.index, f_uv) != Trim.OUTSIDE
         better = inside & (f_dist <= node_distance) & (f_dist < best)
         best[better], owner[better], uv[better] = f_dist[better], face.index, f_uv[better]
-    on_face = cls.role == FACE
+    on_face = cls.role == Role.FACE
     assert on_face.sum() > 2000
     np.testing.assert_array_equal(cls.owner[on_face], owner[on_face])
     np.testing.assert_allclose(cls.distance[on_face], best[on_face], rtol=0, atol=1e-9)

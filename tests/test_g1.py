@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_surface
-from hot2cold.pipeline.face_fit import SIDES
 from hot2cold.pipeline.g1 import NOT_ISO_SIDE, TangentEdge, correct_g1, kink_angles, tangent_edges
 from hot2cold.core.model import Edge, EdgeUse, Face, Part
 
@@ -215,7 +214,7 @@ def test_blade_kinks_removed(blade_part):
     perturbed_rows = {}
     for te in found:
         for k, (side, _) in zip(te.faces, te.sides):
-            axis, end = SIDES[side]
+            axis, end = side.axis, side.end
             s = surfaces[k]
             i = 1 if end == 0 else s.shape[axis] - 2
             poles = s.poles.copy()
@@ -241,7 +240,7 @@ def test_blade_kinks_removed(blade_part):
         assert rep.kink_after_max <= 0.01
         # common edge rows unchanged bit for bit
         for k, (side, _) in zip(te.faces, te.sides):
-            axis, end = SIDES[side]
+            axis, end = side.axis, side.end
             i = 0 if end == 0 else hot[k].shape[axis] - 1
             index = (i, slice(None)) if axis == 0 else (slice(None), i)
             assert np.array_equal(corrected[k].poles[index], perturbed[k].poles[index])

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hot2cold.core.bspline import evaluate_surface
-from hot2cold.pipeline.classify import IGNORED
+from hot2cold.core.model import Role
 from hot2cold.kernel.convert import surface_to_record
 from hot2cold.kernel.step import read_step
 from hot2cold.pipeline.morph import morph
@@ -77,7 +77,7 @@ def test_offset_and_volume_nodes_change_nothing_beyond_that(blade_shape, blade_n
     # displacements belong to the FE nodes where they are: evaluate the field at the offset positions
     noisy = morph(blade_shape, (points, UNTWIST(points)))
     assert noisy.report.nodes_ignored == len(blade_volume_nodes)
-    assert np.all(noisy.classification.role[len(offset):] == IGNORED)
+    assert np.all(noisy.classification.role[len(offset):] == Role.IGNORED)
     deviation = np.concatenate(face_deviation(noisy, UNTWIST.exact_map, spacing=0.5))
     assert deviation.max() <= 1e-3 and deviation.mean() <= 1e-4
     for a, b in zip(clean.faces, noisy.faces):

@@ -7,8 +7,8 @@ import pytest
 from hot2cold.pipeline.artificial import FieldEstimator
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_curve
 from hot2cold.pipeline.edge_fit import morph_edge
-from hot2cold.pipeline.face_fit import _artificial_parameters, _side_of
-from hot2cold.core.model import EdgeUse
+from hot2cold.pipeline.face_fit import _artificial_parameters
+from hot2cold.core.model import EdgeUse, side_along
 
 RNG = np.random.default_rng(11)
 A = np.array([[0.996, 0.01, 0.0], [-0.01, 0.996, 0.002], [0.0, -0.002, 0.996]])
@@ -80,7 +80,7 @@ def _surface():
     (np.column_stack([np.linspace(0, 1, 5), np.linspace(0, 1, 5)]), None),   # a diagonal trim curve
 ])
 def test_side_detection(uv, expected):
-    assert _side_of(_surface(), EdgeUse(edge=0, t=np.linspace(0, 1, len(uv)), uv=uv)) == expected
+    assert side_along(_surface(), EdgeUse(edge=0, t=np.linspace(0, 1, len(uv)), uv=uv)) == expected
 
 
 def test_sparse_patches_get_a_grid_of_artificial_nodes():

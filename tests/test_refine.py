@@ -17,12 +17,12 @@ from OCP.gp import gp_Pnt
 from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, elevated_knots, evaluate_curve, evaluate_surface,
                                    insert_knots, refine_curve, refine_surface, surface_normals)
 from hot2cold.cli import main
-from hot2cold.pipeline.face_fit import _side_of
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.convert import curve_to_record, record_to_curve, record_to_surface, surface_to_record
 from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.kernel.step import read_step, write_step
 from hot2cold.pipeline.morph import check_result, morph
+from hot2cold.core.model import side_along
 from hot2cold.pipeline.refine import edge_distances, face_distances
 from hot2cold.settings import Settings
 
@@ -291,7 +291,7 @@ def test_edges_and_the_faces_sharing_them_are_refined_together():
         for use in face.uses:
             if use.edge not in arcs:
                 continue
-            side, backwards = _side_of(face.surface, use)
+            side, backwards = side_along(face.surface, use)
             row = cold.poles[:, 0 if side == "v0" else -1]                      # the arcs run along u
             edge = result.edges[use.edge].curve
             poles = edge.poles[::-1] if backwards else edge.poles

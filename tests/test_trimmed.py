@@ -36,7 +36,8 @@ import pytest
 
 from hot2cold.core.bspline import evaluate_surface, surface_derivatives
 from hot2cold.kernel.validity import check_solids
-from hot2cold.kernel.project import OUTSIDE, Projector
+from hot2cold.core.domain import Trim
+from hot2cold.kernel.project import Projector
 from hot2cold.kernel.sampling import edge_list, face_list, face_samples, fe_surface_nodes
 from hot2cold.kernel.step import read_step
 from hot2cold.pipeline.load import load_part
@@ -117,7 +118,7 @@ def extension(result, exact_map, k: int, n: int = 80) -> Extension:
     uu, vv = np.meshgrid(np.linspace(u0, u1, n), np.linspace(v0, v1, n), indexing="ij")
     u, v = uu.ravel(), vv.ravel()
     hot_shape = result.hot.wrapped
-    outside = Projector(face_list(hot_shape), edge_list(hot_shape)).classify(k, np.column_stack([u, v])) == OUTSIDE
+    outside = Projector(face_list(hot_shape), edge_list(hot_shape)).classify(k, np.column_stack([u, v])) == Trim.OUTSIDE
     hot = evaluate_surface(face.surface, u, v)
     deviation = np.linalg.norm(evaluate_surface(cold, u, v) - exact_map(hot), axis=1)
     jac = _field_jacobian(exact_map, hot)
@@ -141,7 +142,7 @@ def trimmed_faces(part) -> list[int]:
     for face in part.faces:
         u0, u1, v0, v1 = face.surface.domain
         uu, vv = np.meshgrid(np.linspace(u0, u1, 40), np.linspace(v0, v1, 40))
-        if np.any(projector.classify(face.index, np.column_stack([uu.ravel(), vv.ravel()])) == OUTSIDE):
+        if np.any(projector.classify(face.index, np.column_stack([uu.ravel(), vv.ravel()])) == Trim.OUTSIDE):
             out.append(face.index)
     return out
 
@@ -254,10 +255,10 @@ HOLE_FACE = 1
 def _data_rank(result, k: int) -> int:
     """Rank of face ``k``'s fit over its FE nodes alone (no artificial nodes), poles of tied sides left out."""
     from hot2cold.core.bspline import surface_basis
-    from hot2cold.pipeline.classify import FACE
+    from hot2cold.core.model import Role
     from hot2cold.pipeline.face_fit import _row
     surface, fm = result.part.faces[k].surface, result.faces[k]
-    uv = result.classification.uv[result.classification.nodes_of(FACE, k)]
+    uv = result.classification.uv[result.classification.nodes_of(Role.FACE, k)]
     free = np.ones(surface.shape, bool)
     for side in fm.tied_sides:
         free[_row(free, side)] = False

@@ -15,11 +15,24 @@ farther than one cell outside the box is outside.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
-#: Raster states; UNSURE points are for the kernel to classify.
-INSIDE, OUTSIDE, UNSURE = 0, 2, 3
+
+class Trim(IntEnum):
+    """Where a parameter pair lies in a face's trimmed domain: one numbering for the raster here and the
+    kernel's classification (:meth:`hot2cold.kernel.project.Projector.classify`), so a value means the
+    same state everywhere.
+
+    The raster answers INSIDE, OUTSIDE or UNSURE (a point for the kernel to classify); the kernel answers
+    INSIDE, ON_BOUNDARY or OUTSIDE.  An ``int`` enum: state arrays stay int arrays.
+    """
+
+    INSIDE = 0
+    ON_BOUNDARY = 1
+    OUTSIDE = 2
+    UNSURE = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,7 +42,7 @@ class DomainRaster:
     Attributes
     ----------
     box : (4,) float, ``(u0, u1, v0, v1)``.
-    state : (n, n) int8, INSIDE, OUTSIDE or UNSURE per cell (first index u, second v).
+    state : (n, n) int8, Trim.INSIDE, Trim.OUTSIDE or Trim.UNSURE per cell (first index u, second v).
     """
 
     box: np.ndarray
@@ -67,7 +80,7 @@ class DomainRaster:
         column = np.clip(np.ceil(u_cross - 0.5), 0, n).astype(int)           # first centre right of it
         np.add.at(crossings, (row, column), 1)
         inside = (np.cumsum(crossings, axis=1)[:, :n] % 2 == 1).T
-        state = np.where(inside, INSIDE, OUTSIDE).astype(np.int8)
+        state = np.where(inside, Trim.INSIDE, Trim.OUTSIDE).astype(np.int8)
 
         # Cells the boundary touches (segments walked in steps of at most half a cell), grown by one cell.
         near = np.zeros((n + 2, n + 2), bool)
@@ -82,18 +95,18 @@ class DomainRaster:
         for di in (-1, 0, 1):
             for dj in (-1, 0, 1):
                 grown[1:-1, 1:-1] |= near[1 + di:n + 1 + di, 1 + dj:n + 1 + dj]
-        state[grown[1:-1, 1:-1]] = UNSURE
+        state[grown[1:-1, 1:-1]] = Trim.UNSURE
         return cls(box, state)
 
     def classify(self, uv: np.ndarray) -> np.ndarray:
-        """State ``(m,)`` (INSIDE, OUTSIDE or UNSURE) of parameter pairs ``uv`` ``(m, 2)``; NaN rows are
-        OUTSIDE."""
+        """State ``(m,)`` int8 (Trim.INSIDE, Trim.OUTSIDE or Trim.UNSURE) of parameter pairs ``uv`` ``(m, 2)``;
+        NaN rows are OUTSIDE."""
         uv = np.asarray(uv, dtype=float).reshape(-1, 2)
         n = self.state.shape[0]
         u0, u1, v0, v1 = self.box
         cu = (uv[:, 0] - u0) * (n / (u1 - u0))
         cv = (uv[:, 1] - v0) * (n / (v1 - v0))
-        out = np.full(len(uv), OUTSIDE, np.int8)
+        out = np.full(len(uv), Trim.OUTSIDE, np.int8)
         finite = np.isfinite(cu) & np.isfinite(cv)
         # Up to one cell outside the box: the border cell decides (it is UNSURE where the boundary runs on
         # the box's edge); farther out: outside.
@@ -102,6 +115,6 @@ class DomainRaster:
         j = np.clip(np.floor(cv[near]).astype(int), 0, n - 1)
         state = self.state[i, j]
         beyond = (cu[near] < 0) | (cu[near] >= n) | (cv[near] < 0) | (cv[near] >= n)
-        state = np.where(beyond & (state != UNSURE), OUTSIDE, state)
+        state = np.where(beyond & (state != Trim.UNSURE), Trim.OUTSIDE, state)
         out[near] = state
         return out

@@ -3,10 +3,15 @@
 Built by :mod:`hot2cold.kernel.topology` from a solid; read by every step of the morph.  Numbering is
 0-based throughout and follows the kernel's ``TopExp.MapShapes`` order of the whole input shape, so face
 ``k`` of the hot part is face ``k`` of the cold part.
+
+Beside the part: the sides of a surface's parameter domain (:class:`Side`, :func:`side_along`), and the
+FE nodes' roles (:class:`Role`) with the record of where each node takes part (:class:`Classification`,
+filled by :mod:`hot2cold.pipeline.classify`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum, IntEnum
 from typing import Any
 
 import numpy as np
@@ -101,3 +106,119 @@ class Part:
     solid_names: tuple[str, ...] = ()
     face_names: tuple[str, ...] = ()
     styles: Any = None
+
+
+class Side(str, Enum):
+    """A side of a surface's parameter domain ``[u0, u1] x [v0, v1]``: the parameter ``axis`` (0: u, 1: v)
+    held at the domain's low (``end`` 0) or high (``end`` 1) end (eq. 32-36 name the sides u=0, u=1, v=0,
+    v=1 of an untrimmed face).
+
+    A ``str`` enum: a side equals, hashes, prints and serialises as its value ("u0", "u1", "v0", "v1"),
+    which the JSON report (``tied_sides``) and the G1 messages show.
+    """
+
+    U0 = "u0"
+    U1 = "u1"
+    V0 = "v0"
+    V1 = "v1"
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+    @property
+    def axis(self) -> int:
+        """The parameter held on the side: 0 (u) or 1 (v)."""
+        return 0 if self.value[0] == "u" else 1
+
+    @property
+    def end(self) -> int:
+        """0 at the domain's low end of ``axis``, 1 at its high end."""
+        return int(self.value[1])
+
+
+def side_along(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9,
+               whole: bool = True) -> tuple[Side, bool] | None:
+    """The side of ``surface``'s domain that the edge use runs along from end to end (with ``whole=False``:
+    lies on, whatever part of the side it covers), and whether it runs against the side's direction; None
+    when it lies on no side.
+
+    ``use.uv`` (m, 2) is taken to lie on a side when its fixed parameter stays within ``rel_tol`` times the
+    domain's span of the side's value.
+    """
+    u0, u1, v0, v1 = surface.domain
+    span = np.array([u1 - u0, v1 - v0])
+    for side in Side:
+        axis = side.axis
+        fixed_value = (u0, u1, v0, v1)[2 * axis + side.end]
+        along = 1 - axis
+        lo, hi = (u0, v0)[along], (u1, v1)[along]
+        if np.all(np.abs(use.uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
+            a, b = use.uv[0, along], use.uv[-1, along]
+            if not whole or (min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]):
+                return side, bool(a > b)
+    return None
+
+
+class Role(IntEnum):
+    """What an FE node feeds (eq. 4, 27, 33-37): a face's interior, an edge, a vertex, or nothing.
+
+    An ``int`` enum: role arrays stay int arrays (the VTU ``role`` point data holds these values) and
+    compare with the members directly.
+    """
+
+    IGNORED = -1
+    FACE = 0
+    EDGE = 1
+    VERTEX = 2
+
+
+def runs(values: np.ndarray) -> list[tuple[int, slice]]:
+    """``(value, slice)`` of each run of equal values of the sorted ``values (c,)``, in order."""
+    cuts = np.flatnonzero(np.diff(values)) + 1
+    starts = np.concatenate([[0], cuts])
+    ends = np.concatenate([cuts, [len(values)]])
+    return [(int(values[a]), slice(a, b)) for a, b in zip(starts, ends) if b > a]
+
+
+@dataclass(frozen=True, eq=False)
+class Classification:
+    """Where each of the N field nodes takes part (filled by :func:`hot2cold.pipeline.classify.classify_nodes`).
+
+    Attributes
+    ----------
+    role : (N,) int, a :class:`Role` value: IGNORED, FACE, EDGE or VERTEX.
+    owner : (N,) int, index of the face, edge or vertex (-1 when ignored).
+    uv : (N, 2) float, foot-point parameters on the owning face (NaN unless role is FACE).
+    t : (N,) float, foot-point parameter on the owning edge (NaN unless role is EDGE).
+    foot : (N, 3) float, the foot point S(u, v), C(t) or the vertex (NaN when ignored).
+    distance : (N,) float, distance from node to its foot point (inf when ignored).
+    node_distance, edge_distance : the lengths (mm) used.
+    """
+
+    role: np.ndarray
+    owner: np.ndarray
+    uv: np.ndarray
+    t: np.ndarray
+    foot: np.ndarray
+    distance: np.ndarray
+    node_distance: float
+    edge_distance: float
+
+    def nodes_of(self, role: Role, index: int) -> np.ndarray:
+        """Indices of the nodes of ``role`` owned by face, edge or vertex ``index``."""
+        return np.flatnonzero((self.role == role) & (self.owner == index))
+
+    def groups(self, role: Role) -> list[tuple[int, np.ndarray]]:
+        """``(index, nodes)`` for every face, edge or vertex that owns nodes of ``role``, in index order
+        (one sort of all nodes instead of a scan per owner)."""
+        nodes = np.flatnonzero(self.role == role)
+        nodes = nodes[np.argsort(self.owner[nodes], kind="stable")]
+        return [(k, nodes[run]) for k, run in runs(self.owner[nodes])]
+
+    @property
+    def used(self) -> np.ndarray:
+        """Mask ``(N,)`` of the nodes that take part."""
+        return self.role != Role.IGNORED

@@ -98,7 +98,7 @@ def surface_path(path: str | os.PathLike) -> Path:
 def node_mesh(result):
     """The FE nodes as a :class:`meshio.Mesh`: hot positions, one vertex cell each, and point data
     ``displacement`` (hot -> cold, mm), ``error`` (eq. 21, mm; NaN where ignored), ``role`` (-1 ignored,
-    0 face, 1 edge, 2 vertex, as :mod:`hot2cold.classify`), ``owner`` (the face, edge or vertex; -1 where
+    0 face, 1 edge, 2 vertex: :class:`hot2cold.core.model.Role`), ``owner`` (the face, edge or vertex; -1 where
     ignored) and ``node_id`` (when the field has ids)."""
     import meshio
 

@@ -24,11 +24,8 @@ from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS
 
-from ..core.domain import UNSURE, DomainRaster
-from ..core.domain import INSIDE as _RASTER_INSIDE
+from ..core.domain import DomainRaster, Trim
 
-#: Position states of :meth:`Projector.classify`.
-INSIDE, ON_BOUNDARY, OUTSIDE = 0, 1, 2
 #: Fewest and most cells along each side of a face's domain raster.
 RASTER_CELLS = (256, 2048)
 #: A face's raster is built when it is first asked about this many points at once (building it costs about
@@ -120,7 +117,8 @@ class Projector:
         return raster
 
     def classify(self, k: int, uv: np.ndarray) -> np.ndarray:
-        """State of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: INSIDE, ON_BOUNDARY or OUTSIDE.
+        """State ``(n,)`` int of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: Trim.INSIDE,
+        Trim.ON_BOUNDARY or Trim.OUTSIDE.
 
         The raster decides points away from the boundary; ``BRepTopAdaptor_FClass2d`` the rest.
         """
@@ -128,8 +126,8 @@ class Projector:
         if k not in self._raster and len(uv) < RASTER_WORTH:
             return self.classify_exactly(k, uv)
         raster = self._domain(k, len(uv)).classify(uv)
-        state = np.where(raster == _RASTER_INSIDE, INSIDE, OUTSIDE)
-        unsure = np.flatnonzero(raster == UNSURE)
+        state = np.where(raster == Trim.INSIDE, Trim.INSIDE, Trim.OUTSIDE)
+        unsure = np.flatnonzero(raster == Trim.UNSURE)
         if len(unsure):
             state[unsure] = self.classify_exactly(k, uv[unsure])
         return state
@@ -140,11 +138,11 @@ class Projector:
         if cls is None:
             cls = BRepTopAdaptor_FClass2d(self._faces[k], self._tol)
             self._class[k] = cls
-        state = np.full(len(uv), OUTSIDE)
+        state = np.full(len(uv), Trim.OUTSIDE)
         for i, (u, v) in enumerate(np.asarray(uv, float)):
             if np.isfinite(u) and np.isfinite(v):
                 s = cls.Perform(gp_Pnt2d(u, v))
-                state[i] = INSIDE if s == TopAbs_IN else ON_BOUNDARY if s == TopAbs_ON else OUTSIDE
+                state[i] = Trim.INSIDE if s == TopAbs_IN else Trim.ON_BOUNDARY if s == TopAbs_ON else Trim.OUTSIDE
         return state
 
     def to_edge(self, e: int, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,13 +16,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
-from .classify import FACE, Classification
 from ..errors import FieldError, InputError, MorphError
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
-from ..kernel.project import OUTSIDE, Projector
-from ..core.model import Part
+from ..kernel.project import Projector
+from ..core.domain import Trim
+from ..core.model import Classification, Part, Role
 from ..settings import Settings
 
 if TYPE_CHECKING:
@@ -104,7 +104,7 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
             f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
             f"this part, or raise --node-distance")
-    on_face = cls.role == FACE
+    on_face = cls.role == Role.FACE
     counts = np.bincount(cls.owner[on_face], minlength=len(part.faces))
     if counts.all():
         return
@@ -219,7 +219,7 @@ def _check_grid(face, spacing: float, projector: Projector) -> np.ndarray:
     whole = all(np.all((np.abs(use.uv[:, 0] - a0) <= tol) | (np.abs(use.uv[:, 0] - a1) <= tol)
                        | (np.abs(use.uv[:, 1] - b0) <= tol) | (np.abs(use.uv[:, 1] - b1) <= tol))
                 for use in face.uses)
-    return uv if whole else uv[projector.classify(face.index, uv) != OUTSIDE]
+    return uv if whole else uv[projector.classify(face.index, uv) != Trim.OUTSIDE]
 
 
 def _points_and_normals(hot, cold, uv: np.ndarray):

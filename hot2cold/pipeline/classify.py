@@ -16,7 +16,7 @@ faces, distances and parameters to 1e-9 as every node projected onto every face 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -24,56 +24,14 @@ from scipy.spatial import cKDTree
 from ..core.bspline import evaluate_curve, evaluate_surface, surface_normals
 from ..io.field import DisplacementField
 from ..core.footpoint import project_to_surface
-from ..kernel.project import OUTSIDE, Projector
-from ..core.model import Part
+from ..core.domain import Trim
+from ..core.model import Classification, Part, Role, runs
 from ..settings import Settings
 
+if TYPE_CHECKING:                              # the kernel's projector is passed in, not built here
+    from ..kernel.project import Projector
+
 log = logging.getLogger(__name__)
-
-#: Node roles.
-IGNORED, FACE, EDGE, VERTEX = -1, 0, 1, 2
-
-
-@dataclass(frozen=True, eq=False)
-class Classification:
-    """Where each of the N field nodes takes part.
-
-    Attributes
-    ----------
-    role : (N,) int, IGNORED, FACE, EDGE or VERTEX.
-    owner : (N,) int, index of the face, edge or vertex (-1 when ignored).
-    uv : (N, 2) float, foot-point parameters on the owning face (NaN unless role is FACE).
-    t : (N,) float, foot-point parameter on the owning edge (NaN unless role is EDGE).
-    foot : (N, 3) float, the foot point S(u, v), C(t) or the vertex (NaN when ignored).
-    distance : (N,) float, distance from node to its foot point (inf when ignored).
-    node_distance, edge_distance : the lengths (mm) used.
-    """
-
-    role: np.ndarray
-    owner: np.ndarray
-    uv: np.ndarray
-    t: np.ndarray
-    foot: np.ndarray
-    distance: np.ndarray
-    node_distance: float
-    edge_distance: float
-
-    def nodes_of(self, role: int, index: int) -> np.ndarray:
-        """Indices of the nodes of ``role`` owned by face, edge or vertex ``index``."""
-        return np.flatnonzero((self.role == role) & (self.owner == index))
-
-    def groups(self, role: int) -> list[tuple[int, np.ndarray]]:
-        """``(index, nodes)`` for every face, edge or vertex that owns nodes of ``role``, in index order
-        (one sort of all nodes instead of a scan per owner)."""
-        nodes = np.flatnonzero(self.role == role)
-        nodes = nodes[np.argsort(self.owner[nodes], kind="stable")]
-        return [(k, nodes[run]) for k, run in _groups(self.owner[nodes])]
-
-    @property
-    def used(self) -> np.ndarray:
-        """Mask ``(N,)`` of the nodes that take part."""
-        return self.role != IGNORED
-
 
 #: Grid of the first look at a face (its lengths and curvature), per parameter direction.
 _COARSE = 33
@@ -103,7 +61,7 @@ def _face_cloud(part: Part, projector: Projector, spacing: float) -> tuple[np.nd
         nv = int(np.clip(np.ceil(length_v / spacing), 2, 200)) + 1
         uu, vv = np.meshgrid(np.linspace(u0, u1, nu), np.linspace(v0, v1, nv), indexing="ij")
         uv = np.column_stack([uu.ravel(), vv.ravel()])
-        uv = np.concatenate([uv[projector.classify(face.index, uv) != OUTSIDE]] +
+        uv = np.concatenate([uv[projector.classify(face.index, uv) != Trim.OUTSIDE]] +
                             [_dense(use.uv, spacing, face) for use in face.uses])
         uv = np.clip(uv, face.surface.domain[::2], face.surface.domain[1::2])
         points.append(evaluate_surface(face.surface, uv[:, 0], uv[:, 1]))
@@ -182,21 +140,13 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
     return key % len(points), key // len(points)
 
 
-def _groups(owner: np.ndarray):
-    """``(owner value, slice)`` of each run of equal values of the sorted ``owner (c,)``."""
-    cuts = np.flatnonzero(np.diff(owner)) + 1
-    starts = np.concatenate([[0], cuts])
-    ends = np.concatenate([cuts, [len(owner)]])
-    return [(int(owner[a]), slice(a, b)) for a, b in zip(starts, ends) if b > a]
-
-
 def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
                    projector: Projector) -> Classification:
     """Classify the nodes of ``field`` on ``part`` (see the module docstring)."""
     node_distance, edge_distance = settings.lengths(part.diagonal)
     points = field.points
     n = len(points)
-    role = np.full(n, IGNORED)
+    role = np.full(n, Role.IGNORED)
     owner = np.full(n, -1)
     uv = np.full((n, 2), np.nan)
     t = np.full(n, np.nan)
@@ -212,10 +162,10 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
         """Face ``k`` takes those of ``nodes`` whose foot point on it is inside, near and nearest so far."""
         near = (f_dist <= node_distance) & (f_dist < best[nodes])
         inside = np.zeros(len(nodes), bool)
-        inside[near] = projector.classify(k, f_uv[near]) != OUTSIDE
+        inside[near] = projector.classify(k, f_uv[near]) != Trim.OUTSIDE
         chosen = nodes[inside]
         best[chosen] = f_dist[inside]
-        role[chosen] = FACE
+        role[chosen] = Role.FACE
         owner[chosen] = k
         uv[chosen] = f_uv[inside]
 
@@ -225,7 +175,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     # Newton's last iterate on this face (which has no foot point inside the box nearer still: that would
     # be a second local minimum within ``node_distance``).
     unsettled = []
-    for k, group in _groups(pair_face):
+    for k, group in runs(pair_face):
         nodes = pair_node[group]
         grid, grid_uv = start_grid(part.faces[k], spacing)
         _, nearest = cKDTree(grid).query(points[nodes], workers=-1)
@@ -238,7 +188,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
         if len(nodes):
             offer(k, nodes, *projector.to_face(k, points[nodes]))
         log.debug("face %d: %d foot points by the kernel", k, len(nodes))
-    on_face = np.flatnonzero(role == FACE)
+    on_face = np.flatnonzero(role == Role.FACE)
     for k in np.unique(owner[on_face]):
         idx = on_face[owner[on_face] == k]
         foot[idx] = evaluate_surface(part.faces[k].surface, uv[idx, 0], uv[idx, 1])
@@ -246,21 +196,21 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
 
     _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector)
     counts = {name: int(np.sum(role == r)) for name, r in
-              (("face", FACE), ("edge", EDGE), ("vertex", VERTEX), ("ignored", IGNORED))}
+              (("face", Role.FACE), ("edge", Role.EDGE), ("vertex", Role.VERTEX), ("ignored", Role.IGNORED))}
     log.info("classified %d nodes: %s", n, counts)
     return Classification(role, owner, uv, t, foot, distance, node_distance, edge_distance)
 
 
 def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector):
     """Re-assign face nodes that lie on a vertex or an edge of their face (in place)."""
-    used = np.flatnonzero(role == FACE)
+    used = np.flatnonzero(role == Role.FACE)
     if len(used) == 0:
         return
     if len(part.vertices):
         d_v, v_idx = cKDTree(part.vertices).query(points[used])
         at_vertex = d_v <= edge_distance
         idx = used[at_vertex]
-        role[idx], owner[idx] = VERTEX, v_idx[at_vertex]
+        role[idx], owner[idx] = Role.VERTEX, v_idx[at_vertex]
         foot[idx], distance[idx] = part.vertices[v_idx[at_vertex]], d_v[at_vertex]
         uv[idx] = np.nan
         used = used[~at_vertex]
@@ -280,7 +230,7 @@ def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, 
     close = used[near <= edge_distance + h]
     pair_node, pair_edge = _candidates(tree, sample_edge, points[close], edge_distance, h)
     best = np.full(len(points), np.inf)
-    for e, group in _groups(pair_edge):
+    for e, group in runs(pair_edge):
         nodes = close[pair_node[group]]
         nodes = nodes[np.isin(owner[nodes], part.edges[e].faces)]
         if not len(nodes):
@@ -289,7 +239,7 @@ def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, 
         hit = (e_dist <= edge_distance) & (e_dist < best[nodes])
         idx = nodes[hit]
         best[idx] = e_dist[hit]
-        role[idx], owner[idx], t[idx], uv[idx] = EDGE, e, e_t[hit], np.nan
+        role[idx], owner[idx], t[idx], uv[idx] = Role.EDGE, e, e_t[hit], np.nan
     on_edge = np.flatnonzero(np.isfinite(best))
     for e in np.unique(owner[on_edge]):
         idx = on_edge[owner[on_edge] == e]

@@ -15,10 +15,9 @@ import numpy as np
 
 from .artificial import FieldEstimator
 from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve
-from .classify import EDGE, VERTEX, Classification
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
-from ..core.model import Part
+from ..core.model import Classification, Part, Role
 from ..settings import Settings
 
 log = logging.getLogger(__name__)
@@ -54,7 +53,7 @@ def vertex_displacements(part: Part, cls: Classification, field: DisplacementFie
     linear estimate from the nearest foot points (an artificial node)."""
     disp = estimator(part.vertices) if len(part.vertices) else np.zeros((0, 3))
     for v in range(len(part.vertices)):
-        nodes = cls.nodes_of(VERTEX, v)
+        nodes = cls.nodes_of(Role.VERTEX, v)
         if len(nodes):
             disp[v] = field.displacements[nodes].mean(axis=0)
     return disp
@@ -124,7 +123,7 @@ def morph_edges(part: Part, cls: Classification, field: DisplacementField, verte
         if edge.degenerate:
             out.append(EdgeMorph(edge.index, None, 0, 0, 0, 0, float("nan")))
             continue
-        nodes = cls.nodes_of(EDGE, edge.index)
+        nodes = cls.nodes_of(Role.EDGE, edge.index)
         out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
                               vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon,
                               edge.index, settings.artificial_weight))

@@ -24,18 +24,13 @@ import numpy as np
 
 from .artificial import FieldEstimator
 from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
-from .classify import FACE, Classification
 from .edge_fit import EdgeMorph
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
-from ..core.model import EdgeUse, Face, Part
+from ..core.model import Classification, EdgeUse, Face, Part, Role, Side, side_along
 from ..settings import Settings
 
 log = logging.getLogger(__name__)
-
-#: Sides of a surface's parameter domain: (parameter axis, end).
-SIDES = {"u0": (0, 0), "u1": (0, 1), "v0": (1, 0), "v1": (1, 1)}
-
 
 @dataclass(frozen=True, eq=False)
 class FaceMorph:
@@ -49,7 +44,7 @@ class FaceMorph:
     edge_rows : int, rows that hold the surface to edges that are not whole sides.
     artificial : int, artificial nodes added in knot-span patches with too few data and over the
         trimmed-away part of the surface.
-    tied_sides : tuple of str, sides whose poles moved with a morphed edge ("u0", "u1", "v0", "v1").
+    tied_sides : tuple of Side, sides whose poles moved with a morphed edge (in the order u0, u1, v0, v1).
     unknowns : int, poles solved for.
     rank : int, rank kept by the truncated SVD.
     condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
@@ -60,45 +55,27 @@ class FaceMorph:
     nodes: int
     edge_rows: int
     artificial: int
-    tied_sides: tuple[str, ...]
+    tied_sides: tuple[Side, ...]
     unknowns: int
     rank: int
     condition: float
 
 
-def _row(array: np.ndarray, side: str) -> tuple:
+def _row(array: np.ndarray, side: Side) -> tuple:
     """Index expression of a side's row of poles in an ``(nu, nv, ...)`` array."""
-    axis, end = SIDES[side]
-    i = 0 if end == 0 else -1
-    return (i, slice(None)) if axis == 0 else (slice(None), i)
+    i = 0 if side.end == 0 else -1
+    return (i, slice(None)) if side.axis == 0 else (slice(None), i)
 
 
 def _normalised(knots: np.ndarray) -> np.ndarray:
     return (knots - knots[0]) / (knots[-1] - knots[0])
 
 
-def _side_of(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9,
-             whole: bool = True) -> tuple[str, bool] | None:
-    """The side a whole edge use runs along (with ``whole=False``: lies on, whatever part of the side it
-    covers), and whether it runs against the side's direction."""
-    u0, u1, v0, v1 = surface.domain
-    span = np.array([u1 - u0, v1 - v0])
-    for side, (axis, end) in SIDES.items():
-        fixed_value = (u0, u1, v0, v1)[2 * axis + end]
-        along = 1 - axis
-        lo, hi = (u0, v0)[along], (u1, v1)[along]
-        if np.all(np.abs(use.uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
-            a, b = use.uv[0, along], use.uv[-1, along]
-            if not whole or (min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]):
-                return side, bool(a > b)
-    return None
-
-
 def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray,
-         tol: float) -> tuple[str, np.ndarray] | None:
+         tol: float) -> tuple[Side, np.ndarray] | None:
     """If ``use`` is a whole side compatible with the surface's row there, the side and the displacements
     ``(row length, 3)`` of that row's poles; else None."""
-    found = _side_of(face.surface, use)
+    found = side_along(face.surface, use)
     if found is None:
         return None
     side, backwards = found
@@ -110,8 +87,8 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
             return None
         return side, np.broadcast_to(vertex_disp[edge.vertices[0]], row.shape)
     curve = edge.curve
-    knots = surface.v_knots if SIDES[side][0] == 0 else surface.u_knots
-    degree = surface.v_degree if SIDES[side][0] == 0 else surface.u_degree
+    knots = surface.v_knots if side.axis == 0 else surface.u_knots
+    degree = surface.v_degree if side.axis == 0 else surface.u_degree
     poles, morphed = curve.poles, edge_morphs[use.edge].curve.poles
     curve_knots = _normalised(curve.knots)
     weights = curve.weights
@@ -214,7 +191,7 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         target_rows.append(moved)
     edge_rows = sum(len(r) for r in uv_rows)
 
-    nodes = cls.nodes_of(FACE, face.index)
+    nodes = cls.nodes_of(Role.FACE, face.index)
     uv_rows.append(cls.uv[nodes])
     target_rows.append(field.displacements[nodes])
     uv = np.concatenate(uv_rows)

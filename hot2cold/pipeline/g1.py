@@ -22,8 +22,7 @@ Both faces move, each towards the common plane.  The cross derivative at a side 
 only on the side row and the second row, so nothing else of the face's boundary changes; poles of the second
 row that lie on a side held by an edge (its two ends, in an untrimmed face) stay fixed.  A face with several
 corrected edges solves for all its second rows at once (a corner pole may belong to two of them).  The sides
-are named as in :mod:`hot2cold.faces` (``"u0"``, ``"u1"``, ``"v0"``, ``"v1"``); indices number from 0 and
-angles are in degrees.
+are :class:`hot2cold.core.model.Side` (u0, u1, v0, v1); indices number from 0 and angles are in degrees.
 """
 from __future__ import annotations
 
@@ -33,9 +32,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.bspline import BSplineCurve, BSplineSurface, surface_derivative_bases, surface_normals
-from .face_fit import SIDES, _side_of
 from ..core.lstsq import solve_tsvd
-from ..core.model import EdgeUse, Face, Part
+from ..core.model import EdgeUse, Face, Part, Side, side_along
 
 log = logging.getLogger(__name__)
 
@@ -51,15 +49,15 @@ class TangentEdge:
     ----------
     edge : int, index of the edge.
     faces : (int, int), its two faces.
-    sides : pair of ``(side, backwards)`` or None per face: the side (``"u0"``, ``"u1"``, ``"v0"``, ``"v1"``)
-        of the face's surface the edge runs along as a whole and whether it runs against the side's
-        direction (see :func:`hot2cold.faces._side_of`); None when the edge is not a whole side.
+    sides : pair of ``(side, backwards)`` or None per face: the :class:`~hot2cold.core.model.Side` of the
+        face's surface the edge runs along as a whole and whether it runs against the side's direction (see
+        :func:`hot2cold.core.model.side_along`); None when the edge is not a whole side.
     hot_angle_max : float, largest angle in degrees between the two faces' normal lines along the edge.
     """
 
     edge: int
     faces: tuple[int, int]
-    sides: tuple[tuple[str, bool] | None, tuple[str, bool] | None]
+    sides: tuple[tuple[Side, bool] | None, tuple[Side, bool] | None]
     hot_angle_max: float
 
 
@@ -160,14 +158,14 @@ def tangent_edges(part: Part, angle_tol_deg: float = 1.0) -> list[TangentEdge]:
         angle = _max(kink_angles(fa.surface, uv_a, fb.surface, uv_b))
         if np.isfinite(angle) and angle < angle_tol_deg:
             out.append(TangentEdge(edge.index, (faces[0], faces[1]),
-                                   (_side_of(fa.surface, use_a), _side_of(fb.surface, use_b)), angle))
+                                   (side_along(fa.surface, use_a), side_along(fb.surface, use_b)), angle))
     log.info("%d of %d edges are tangent (normals within %.3g deg)", len(out), len(part.edges), angle_tol_deg)
     return out
 
 
-def _row_mask(shape: tuple[int, int], side: str, second: bool = False) -> np.ndarray:
+def _row_mask(shape: tuple[int, int], side: Side, second: bool = False) -> np.ndarray:
     """Boolean ``(nu, nv)`` mask of a side's row of poles, or of the row next to it if ``second``."""
-    axis, end = SIDES[side]
+    axis, end = side.axis, side.end
     k = (1 if second else 0) if end == 0 else (shape[axis] - 2 if second else shape[axis] - 1)
     mask = np.zeros(shape, bool)
     if axis == 0:
@@ -177,16 +175,15 @@ def _row_mask(shape: tuple[int, int], side: str, second: bool = False) -> np.nda
     return mask
 
 
-def _side_row(poles: np.ndarray, side: str, backwards: bool) -> tuple:
+def _side_row(poles: np.ndarray, side: Side, backwards: bool) -> tuple:
     """Index expression of a side's row in a ``(nu, nv, ...)`` array, ordered along the edge."""
-    axis, end = SIDES[side]
-    i = 0 if end == 0 else -1
+    i = 0 if side.end == 0 else -1
     along = slice(None, None, -1) if backwards else slice(None)
-    return (i, along) if axis == 0 else (along, i)
+    return (i, along) if side.axis == 0 else (along, i)
 
 
 def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Face, Face],
-                    sides: tuple[tuple[str, bool], tuple[str, bool]], tied_sides: list[tuple[str, ...]]) -> None:
+                    sides: tuple[tuple[Side, bool], tuple[Side, bool]], tied_sides: list[tuple[Side, ...]]) -> None:
     """Make the two faces' side rows along an edge one row again (the paper's common row, eq. 74).
 
     Faces that are trimmed are fitted each on its own, so their side rows, equal when hot, drift apart by
@@ -196,7 +193,7 @@ def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Fac
     """
     rows, hot_rows, knots, weights = [], [], [], []
     for face, (side, backwards) in zip(faces, sides):
-        axis = SIDES[side][0]
+        axis = side.axis
         index = _side_row(face.surface.poles, side, backwards)
         rows.append(surfaces[face.index].poles[index])
         hot_rows.append(face.surface.poles[index])
@@ -206,7 +203,7 @@ def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Fac
         w = face.surface.weights
         weights.append(None if w is None else w[index])
         if (face.surface.v_degree if axis == 0 else face.surface.u_degree) != \
-                (faces[0].surface.v_degree if SIDES[sides[0][0]][0] == 0 else faces[0].surface.u_degree):
+                (faces[0].surface.v_degree if sides[0][0].axis == 0 else faces[0].surface.u_degree):
             return
     if (rows[0].shape != rows[1].shape or knots[0].shape != knots[1].shape
             or not np.allclose(knots[0], knots[1], rtol=0, atol=1e-9)
@@ -229,26 +226,27 @@ def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Fac
         surfaces[face.index] = surfaces[face.index].with_poles(poles)
 
 
-def _fixed_reason(face: Face, found: tuple[str, bool] | None, tied: tuple[str, ...]) -> str:
-    """Why ``face`` cannot turn about an edge that runs along or lies on its side ``found`` (``_side_of(..., whole=False)``; None when the
-    edge is not on a side), or "" when its second row there has poles free to move."""
+def _fixed_reason(face: Face, found: tuple[Side, bool] | None, tied: tuple[Side, ...]) -> str:
+    """Why ``face`` cannot turn about an edge that runs along or lies on its side ``found``
+    (``side_along(..., whole=False)``; None when the edge is not on a side), or "" when its second row there
+    has poles free to move."""
     if found is None:
         return NOT_ISO_SIDE
     side = found[0]
-    if face.surface.shape[SIDES[side][0]] < 3:
+    if face.surface.shape[side.axis] < 3:
         return f"the second row of face {face.index} at side {side} is its opposite boundary row"
     if not (_row_mask(face.surface.shape, side, True) & ~_held_poles(face, tied)).any():
         return f"every pole of the second row of face {face.index} at side {side} is held"
     return ""
 
 
-def _held_poles(face: Face, tied: tuple[str, ...]) -> np.ndarray:
+def _held_poles(face: Face, tied: tuple[Side, ...]) -> np.ndarray:
     """Boolean ``(nu, nv)`` mask of the poles on the face's tied sides and on sides that are whole edges."""
     shape = face.surface.shape
     held = np.zeros(shape, bool)
-    sides = set(tied)
+    sides = {Side(s) for s in tied}                 # a caller may name the sides by value ("u0")
     for use in face.uses:
-        found = _side_of(face.surface, use)
+        found = side_along(face.surface, use)
         if found is not None:
             sides.add(found[0])
     for side in sides:
@@ -262,13 +260,13 @@ class _Task:
 
     report: int           # index into the reports
     face: int
-    side: str
+    side: Side
     uv: np.ndarray        # (m, 2) points u_q on this face
     normal_t: np.ndarray  # (m, 3) n_T, eq. (63), NaN rows dropped
     keep: np.ndarray      # (m,) bool, rows where both normals are defined
 
 
-def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[str, ...]],
+def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
                edges: list[TangentEdge] | None = None,
                n_points_factor: int = 2) -> tuple[list[BSplineSurface], list[G1Report]]:
     """Remove the kinks the morph left along the hot part's tangent edges.
@@ -277,7 +275,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     ----------
     part : the hot part (its faces' surfaces give the sides and the hot angles).
     face_surfaces : the morphed surface of every face, same degrees, knots and weights as the hot ones.
-    tied_sides : per face, the sides whose rows of poles are held by edges (``FaceMorph.tied_sides``).
+    tied_sides : per face, the sides whose rows of poles are held by edges (``FaceMorph.tied_sides``; a
+        :class:`~hot2cold.core.model.Side` or its value, "u0" ...).
     edges : the tangent edges to treat; default :func:`tangent_edges` of ``part``.
     n_points_factor : equidistant edge points per pole of a second row (the paper takes about two).
 
@@ -308,7 +307,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         before.append(_max(kink_angles(surfaces[fa.index], uv_a, surfaces[fb.index], uv_b)))
         # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
         # the side row and the second row only, whatever part of the side the edge covers.
-        sides = (_side_of(fa.surface, use_a, whole=False), _side_of(fb.surface, use_b, whole=False))
+        sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
         why = [_fixed_reason(face, found, tied_sides[face.index]) for face, found in zip((fa, fb), sides)]
         if all(why):
             reason = why[0] if why[0] == why[1] else "; ".join(why)
@@ -321,14 +320,14 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         if None not in sides:
             _share_side_row(part, surfaces, (fa, fb), sides, tied_sides)
         # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
-        n_row = max(face.surface.shape[1 - SIDES[found[0]][0]] for face, found in zip((fa, fb), sides) if found)
+        n_row = max(face.surface.shape[1 - found[0].axis] for face, found in zip((fa, fb), sides) if found)
         m = max(n_points_factor * n_row, 2)
         t = np.linspace(min(use_a.t[0], use_a.t[-1]), max(use_a.t[0], use_a.t[-1]), m)
         uvs = []
         for face, use, found in zip((fa, fb), (use_a, use_b), sides):
             uv = _uv_at(use, t)
             if found is not None:
-                axis, end = SIDES[found[0]]
+                axis, end = found[0].axis, found[0].end
                 uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
             uvs.append(uv)
         na = surface_normals(surfaces[fa.index], uvs[0][:, 0], uvs[0][:, 1])
@@ -358,7 +357,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     return surfaces, reports
 
 
-def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[str, ...], tasks: list[_Task]) -> None:
+def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ...], tasks: list[_Task]) -> None:
     """Move the second rows of ``face`` named by ``tasks`` so that its cross derivatives lie in the common
     tangent planes (eq. 64-75), all rows at once; ``surfaces[face.index]`` is replaced."""
     surface = surfaces[face.index]
@@ -375,7 +374,7 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[str, ...
         if not len(uv):
             continue
         du, dv = surface_derivative_bases(surface, uv[:, 0], uv[:, 1])
-        basis = du if SIDES[task.side][0] == 0 else dv          # derivative across the edge, eq. (58)/(61)
+        basis = du if task.side.axis == 0 else dv          # derivative across the edge, eq. (58)/(61)
         tangent = basis @ flat                                   # t_v (m, 3)
         n_t = task.normal_t[task.keep]
         delta = -(np.sum(tangent * n_t, axis=1) / np.sum(n_t * n_t, axis=1))[:, None] * n_t   # eq. (65)
@@ -482,7 +481,7 @@ def _cluster_normals(part: Part, faces: list[int], vertex: int, curves: list[BSp
     return out
 
 
-def edge_decided(part: Part, tied_sides: list[tuple[str, ...]] | None = None) -> set[tuple[int, int]]:
+def edge_decided(part: Part, tied_sides: list[tuple[Side, ...]] | None = None) -> set[tuple[int, int]]:
     """The ``(vertex, face)`` pairs where the face's normal at the vertex is the cross product of its two
     edges' tangents: the vertex is a corner of the face's surface and both edges there are whole sides,
     tied to the face's rows (``FaceMorph.tied_sides``; None: before the fit, every whole side counts), so
@@ -491,14 +490,14 @@ def edge_decided(part: Part, tied_sides: list[tuple[str, ...]] | None = None) ->
     for face in part.faces:
         sides = {}
         for use in face.uses:
-            found = _side_of(face.surface, use)
+            found = side_along(face.surface, use)
             if found is not None:
                 sides[use.edge] = found[0]
         for v in {v for e in sides for v in part.edges[e].vertices}:
             at = _edges_at(part, face.index, v)
             tied = sides.values() if tied_sides is None else tied_sides[face.index]
             if len(at) == 2 and all(sides.get(e.index) in tied for e in at) \
-                    and len({SIDES[sides[e.index]][0] for e in at}) == 2:
+                    and len({sides[e.index].axis for e in at}) == 2:
                 out.add((v, face.index))
     return out
 

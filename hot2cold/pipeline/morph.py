@@ -21,7 +21,7 @@ from threadpoolctl import threadpool_limits
 
 from .artificial import FieldEstimator
 from .checks import check_cold, check_coverage, check_hot, check_result
-from .classify import EDGE, Classification, classify_nodes
+from .classify import classify_nodes
 from .edge_fit import EdgeMorph, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
@@ -29,13 +29,14 @@ from .g1 import (correct_corners, correct_g1, edge_decided, kink_added, surface_
                  with_corners)
 from .invert import invert_field
 from ..kernel.validity import check_solids
-from ..kernel.project import OUTSIDE, Projector
+from ..kernel.project import Projector
 from ..kernel.rebuild import rebuild
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.shapes import to_cadquery
 from ..kernel.step import write_step
 from .load import load_part
-from ..core.model import Part
+from ..core.domain import Trim
+from ..core.model import Classification, Part, Role
 from .refine import refine
 from .report import Report, build_report, node_errors
 from ..settings import Settings
@@ -175,7 +176,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     report_progress("edges")
 
     def trimmed_away(k, uv):
-        return projector.classify(k, uv) == OUTSIDE
+        return projector.classify(k, uv) == Trim.OUTSIDE
 
     face_morphs = morph_faces(part, cls, field, edge_morphs, vertex_disp, estimator, settings,
                               trimmed_away=trimmed_away,
@@ -195,7 +196,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
         def fit_edges(part_, edges_, refined_edges):
             edges_ = list(edges_)
             for e in refined_edges:
-                edge, nodes = part_.edges[e], cls.nodes_of(EDGE, e)
+                edge, nodes = part_.edges[e], cls.nodes_of(Role.EDGE, e)
                 edges_[e] = morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
                                        vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon, e,
                                        settings.artificial_weight)

@@ -31,17 +31,17 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
-from typing import Callable
+from enum import Enum
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from ..core.bspline import (BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve,
                             evaluate_surface, refine_curve, refine_surface, surface_derivatives)
-from .classify import EDGE, FACE, Classification
 from .edge_fit import EdgeMorph
-from .face_fit import SIDES, FaceMorph, _side_of
+from .face_fit import FaceMorph
 from ..io.field import DisplacementField
-from ..core.model import Edge, Face, Part
+from ..core.model import Classification, Edge, Face, Part, Role, side_along
 
 log = logging.getLogger(__name__)
 
@@ -158,13 +158,13 @@ def edge_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> np
 
 def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField):
     """Errors of a face at its nodes: ``(uv (m, 2), error (m,))``, the distances of eq. (21)."""
-    nodes = cls.nodes_of(FACE, face.index)
+    nodes = cls.nodes_of(Role.FACE, face.index)
     target = cls.foot[nodes] + field.displacements[nodes]
     return cls.uv[nodes], face_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
 
 
 def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField):
-    nodes = cls.nodes_of(EDGE, edge.index)
+    nodes = cls.nodes_of(Role.EDGE, edge.index)
     if edge.degenerate or not len(nodes):
         return np.zeros(0), np.zeros(0)
     return cls.t[nodes], edge_distances(morph.curve, cls.foot[nodes] + field.displacements[nodes], cls.t[nodes])
@@ -172,7 +172,7 @@ def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: Displ
 
 def node_residuals(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField) -> np.ndarray:
     """Fit residuals ``(m,)`` (mm) at the face's nodes: ``|S_cold(u_k, v_k) - S_hot(u_k, v_k) - dd_k|``."""
-    nodes = cls.nodes_of(FACE, face.index)
+    nodes = cls.nodes_of(Role.FACE, face.index)
     u, v = cls.uv[nodes, 0], cls.uv[nodes, 1]
     target = evaluate_surface(face.surface, u, v) + field.displacements[nodes]
     return np.linalg.norm(evaluate_surface(morph.surface, u, v) - target, axis=1)
@@ -186,8 +186,32 @@ def _ends(knots: np.ndarray) -> tuple[float, float]:
     return float(knots[0]), float(knots[-1])
 
 
+class Kind(Enum):
+    """What a member of a parameter class is: a parameter direction of a face, or an edge."""
+
+    FACE = "face"
+    EDGE = "edge"
+
+
+class Member(NamedTuple):
+    """A member of a parameter class: the ``axis`` (0: u, 1: v) direction of face ``index``, or edge
+    ``index`` (``axis`` None).  Build one with :meth:`face` or :meth:`edge`."""
+
+    kind: Kind
+    index: int
+    axis: int | None = None
+
+    @classmethod
+    def face(cls, index: int, axis: int) -> "Member":
+        return cls(Kind.FACE, index, axis)
+
+    @classmethod
+    def edge(cls, index: int) -> "Member":
+        return cls(Kind.EDGE, index)
+
+
 class _Classes:
-    """Union-find over the members ``("f", face, axis)`` and ``("e", edge)``, each with the map from its own
+    """Union-find over the members (:class:`Member`: face directions and edges), each with the map from its own
     parameter to the normalised parameter of its class's root: ``s = flip(x) `` with ``flip`` reversing
     when ``reversed``.  A class reached both ways (a member tied forwards along one path and backwards along
     another) is ``symmetric``: its knots are inserted mirrored too."""
@@ -197,12 +221,12 @@ class _Classes:
         self.flip: dict = {}           # member -> reversed relative to parent
         self.symmetric: set = set()    # roots
 
-    def add(self, m):
+    def add(self, m: Member):
         if m not in self.parent:
             self.parent[m] = m
             self.flip[m] = False
 
-    def find(self, m) -> tuple:
+    def find(self, m: Member) -> tuple[Member, bool]:
         """The root of ``m`` and whether ``m`` runs reversed to it."""
         flip = False
         while self.parent[m] != m:
@@ -210,7 +234,7 @@ class _Classes:
             m = self.parent[m]
         return m, flip
 
-    def union(self, a, b, reversed_: bool):
+    def union(self, a: Member, b: Member, reversed_: bool):
         self.add(a)
         self.add(b)
         ra, fa = self.find(a)
@@ -236,27 +260,27 @@ def _classes(part: Part, face_morphs: list[FaceMorph]) -> _Classes:
     classes = _Classes()
     for face, morph in zip(part.faces, face_morphs):
         for axis in (0, 1):
-            classes.add(("f", face.index, axis))
+            classes.add(Member.face(face.index, axis))
         for use in face.uses:
             edge = part.edges[use.edge]
-            found = _side_of(face.surface, use)
+            found = side_along(face.surface, use)
             if edge.degenerate or found is None or found[0] not in morph.tied_sides:
                 continue
             side, backwards = found
-            along = 1 - SIDES[side][0]
-            classes.union(("f", face.index, along), ("e", edge.index), backwards)
+            along = 1 - side.axis
+            classes.union(Member.face(face.index, along), Member.edge(edge.index), backwards)
     for edge in part.edges:
         if not edge.degenerate:
-            classes.add(("e", edge.index))
+            classes.add(Member.edge(edge.index))
     return classes
 
 
-def _knots_degree(part: Part, member) -> tuple[np.ndarray, int]:
-    if member[0] == "e":
-        curve = part.edges[member[1]].curve
+def _knots_degree(part: Part, member: Member) -> tuple[np.ndarray, int]:
+    if member.kind is Kind.EDGE:
+        curve = part.edges[member.index].curve
         return curve.knots, curve.degree
-    surface = part.faces[member[1]].surface
-    return (surface.u_knots, surface.u_degree) if member[2] == 0 else (surface.v_knots, surface.v_degree)
+    surface = part.faces[member.index].surface
+    return (surface.u_knots, surface.u_degree) if member.axis == 0 else (surface.v_knots, surface.v_degree)
 
 
 def _breaks(knots: np.ndarray, degree: int) -> np.ndarray:
@@ -368,25 +392,26 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     face_err, edge_err = errors()
     face_before = [worst(e) for _, e in face_err]
     edge_before = [worst(e) for _, e in edge_err]
-    stuck = set()
+    stuck_faces: set[int] = set()                # faces and edges that miss where no span may be halved
+    stuck_edges: set[int] = set()
     rounds = 0
     while rounds < max_rounds:
         bad_faces = [k for k, (_, e) in enumerate(face_err) if worst(e) > tolerance]
         bad_edges = [k for k, (_, e) in enumerate(edge_err) if worst(e) > tolerance]
         if not bad_faces and not bad_edges:
-            stuck = set()
+            stuck_faces, stuck_edges = set(), set()
             break
         classes = _classes(part, face_morphs)
         marks: dict = {}                          # class root -> list of normalised knots to insert
         elevate: set = set()                      # class roots to raise to REFINED_DEGREE
-        unplaced = set()
+        unplaced_faces, unplaced_edges = set(), set()
         for k in bad_faces:
             uv, err = face_err[k]
             wanted = _face_marks(part.faces[k].surface, uv, err > tolerance)
             if not any(len(m) or up for m, up in wanted):
-                unplaced.add(("f", k))
+                unplaced_faces.add(k)
             for axis, (mids, up) in enumerate(wanted):
-                member = ("f", k, axis)
+                member = Member.face(k, axis)
                 knots, _ = _knots_degree(part, member)
                 root, flip = classes.find(member)
                 marks.setdefault(root, []).append(_to_class(mids, knots, flip))
@@ -396,8 +421,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             t, err = edge_err[e]
             mids, up = _edge_marks(part.edges[e].curve, t, err > tolerance)
             if not len(mids) and not up:
-                unplaced.add(("e", e))
-            member = ("e", e)
+                unplaced_edges.add(e)
+            member = Member.edge(e)
             knots, _ = _knots_degree(part, member)
             root, flip = classes.find(member)
             marks.setdefault(root, []).append(_to_class(mids, knots, flip))
@@ -417,20 +442,20 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                 lo, hi = knots[degree], knots[len(knots) - degree - 1]
                 inserted = inserted[(inserted > lo) & (inserted < hi)]
                 target = max(degree, REFINED_DEGREE) if root in elevate else degree
-                if member[0] == "e":
-                    e = member[1]
+                if member.kind is Kind.EDGE:
+                    e = member.index
                     new_edges[e] = replace(new_edges[e], curve=refine_curve(new_edges[e].curve, inserted, target))
                     if new_edges[e].curve is not part.edges[e].curve:
                         changed_edges.add(e)
                         edge_added[e] += len(inserted)
                 else:
-                    _, k, axis = member
+                    k, axis = member.index, member.axis
                     surface = refine_surface(new_faces[k].surface, axis, inserted, target)
                     if surface is not new_faces[k].surface:
                         new_faces[k] = replace(new_faces[k], surface=surface)
                         changed_faces.add(k)
                         face_added[k, axis] += len(inserted)
-        stuck = unplaced
+        stuck_faces, stuck_edges = unplaced_faces, unplaced_edges
         if not changed_faces and not changed_edges:
             break
         part = replace(part, faces=new_faces, edges=new_edges)
@@ -455,7 +480,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             continue
         s0, s1 = hot.surface, face.surface
         face_reports.append(Refinement(
-            k, missed, not (("f", k) in stuck and worst(face_err[k][1]) > tolerance),
+            k, missed, not (k in stuck_faces and worst(face_err[k][1]) > tolerance),
             int(face_added[k, 0]), int(face_added[k, 1]),
             f"{s0.u_degree}x{s0.v_degree}", f"{s1.u_degree}x{s1.v_degree}",
             "x".join(map(str, s0.shape)), "x".join(map(str, s1.shape)), int(face_rounds[k]),
@@ -466,7 +491,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         if edge.degenerate or (not missed and not edge_rounds[e]):
             continue
         edge_reports.append(EdgeRefinement(
-            e, missed, not (("e", e) in stuck and worst(edge_err[e][1]) > tolerance),
+            e, missed, not (e in stuck_edges and worst(edge_err[e][1]) > tolerance),
             int(edge_added[e]), hot.curve.degree, edge.curve.degree,
             hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e], worst(edge_err[e][1])))
     return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds)

@@ -12,14 +12,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .classify import EDGE, FACE, IGNORED, VERTEX, Classification
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..core.footpoint import project_to_surface
 from ..kernel.validity import SolidCheck
 from ..kernel.project import Projector
-from ..core.model import Part
+from ..core.model import Classification, Part, Role
 
 
 @dataclass(frozen=True)
@@ -214,15 +213,15 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
     """
     errors = np.full(len(cls.role), np.nan)
     target = cls.foot + field.displacements
-    for k, nodes in cls.groups(FACE):
+    for k, nodes in cls.groups(Role.FACE):
         fp = project_to_surface(cold_surfaces[k], target[nodes], cls.uv[nodes], projector.face_box(k))
         errors[nodes] = fp.distance
         open_ = nodes[~fp.settled]
         if len(open_):
             errors[open_] = projector.to_face(k, target[open_])[1]
-    for k, nodes in cls.groups(EDGE):
+    for k, nodes in cls.groups(Role.EDGE):
         errors[nodes] = projector.to_edge(k, target[nodes])[1]
-    at_vertex = np.flatnonzero(cls.role == VERTEX)
+    at_vertex = np.flatnonzero(cls.role == Role.VERTEX)
     errors[at_vertex] = np.linalg.norm(target[at_vertex] - cold_vertices[cls.owner[at_vertex]], axis=1)
     return errors
 
@@ -237,19 +236,19 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
     """Assemble the :class:`Report` of a morph."""
     faces = []
     for fm in face_morphs:
-        d = errors[cls.nodes_of(FACE, fm.index)]
+        d = errors[cls.nodes_of(Role.FACE, fm.index)]
         nu, nv = fm.surface.shape
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
                                 fm.artificial))
     edges = []
     for em in edge_morphs:
-        d = errors[cls.nodes_of(EDGE, em.index)]
+        d = errors[cls.nodes_of(Role.EDGE, em.index)]
         n_poles = 0 if em.curve is None else em.curve.n_poles
         edges.append(EdgeReport(em.index, list(part.edges[em.index].faces), em.nodes, n_poles, *_stats(d),
                                 float(gaps[em.index]), em.artificial))
     used = cls.used
-    vertex_err = errors[cls.role == VERTEX]
+    vertex_err = errors[cls.role == Role.VERTEX]
     names = tuple(getattr(part, "solid_names", ()))
     solids = [SolidReport(i, c.faces, c.valid, c.free_edges, h.volume, c.volume,
                           names[i] if i < len(names) else "")
@@ -257,8 +256,10 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
     all_err = errors[used]
     return Report(
         hot=hot_name, field=field.source, nodes_total=len(cls.role),
-        nodes_on_faces=int(np.sum(cls.role == FACE)), nodes_on_edges=int(np.sum(cls.role == EDGE)),
-        nodes_on_vertices=int(np.sum(cls.role == VERTEX)), nodes_ignored=int(np.sum(cls.role == IGNORED)),
+        nodes_on_faces=int(np.sum(cls.role == Role.FACE)),
+        nodes_on_edges=int(np.sum(cls.role == Role.EDGE)),
+        nodes_on_vertices=int(np.sum(cls.role == Role.VERTEX)),
+        nodes_ignored=int(np.sum(cls.role == Role.IGNORED)),
         node_distance=cls.node_distance, edge_distance=cls.edge_distance,
         max_displacement=float(np.linalg.norm(field.displacements[used], axis=1).max()) if used.any() else 0.0,
         delta_max=_stats(all_err)[0], delta_mean=_stats(all_err)[1],

@@ -29,10 +29,9 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter
 
-from ..core.bspline import (BSplineSurface, clip_uv, evaluate_curve, mean_curvature,
-                            surface_derivatives)
+from ..core.bspline import BSplineSurface, clip_uv, evaluate_curve, mean_curvature, surface_derivatives
+from ..core.model import Role
 from ..io.export import points_on_faces
-from ..pipeline.classify import EDGE, FACE
 from ..kernel.tessellate import TriangleMesh, tessellate
 
 log = logging.getLogger(__name__)
@@ -288,7 +287,7 @@ def _edge_node_uv(result, face: int) -> tuple[np.ndarray, np.ndarray]:
     cls = result.classification
     idx, uvs = [], []
     for use in result.part.faces[face].uses:
-        nodes = cls.nodes_of(EDGE, use.edge)
+        nodes = cls.nodes_of(Role.EDGE, use.edge)
         if not len(nodes) or len(use.t) < 2:
             continue
         t = cls.t[nodes]
@@ -329,7 +328,7 @@ def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh
         dev = _Developed.of(surface, clip_uv(surface, mesh.uv[verts]))
         xy = dev.xy(mesh.uv[verts])
         ax.add_collection(PolyCollection(xy[tris], facecolors="0.9", edgecolors="0.9", linewidths=0.3))
-        face_nodes = cls.nodes_of(FACE, k)
+        face_nodes = cls.nodes_of(Role.FACE, k)
         edge_nodes, edge_uv = _edge_node_uv(result, k)
         pts = np.concatenate([dev.xy(cls.uv[face_nodes]), dev.xy(edge_uv)])
         vals = np.concatenate([err[face_nodes], err[edge_nodes]])
