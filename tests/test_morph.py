@@ -21,7 +21,7 @@ UNTWIST = UntwistField(axis_point=(0.0, 0.0, 0.0), untwist_deg_per_mm=0.02, stre
 def _cold_poles(result) -> list[np.ndarray]:
     """Control nets read back from the cold kernel shape (not from the numeric records)."""
     from hot2cold.kernel.topology import bspline_surface
-    return [surface_to_record(*bspline_surface(face)).poles for face in result.part.kernel.faces]
+    return [surface_to_record(*bspline_surface(face)).poles for face in result.cold_kernel.faces]
 
 
 @pytest.mark.parametrize("part", ["block", "blade"])

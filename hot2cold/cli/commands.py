@@ -232,6 +232,8 @@ def _write_exports(args, result):
 
 
 def _morph(args) -> int:
+    from threadpoolctl import threadpool_limits
+
     from .batch import settings_for, tolerance_missed, write_cold
     from ..pipeline.morph import morph
 
@@ -245,8 +247,9 @@ def _morph(args) -> int:
                             args.extrapolate)
     progress = None if args.quiet else _Progress(sys.stderr)
     try:
-        result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
-                       invert=args.invert, progress=progress)
+        with threadpool_limits(1, "blas"):  # this process's BLAS: the small fits gain nothing from threads
+            result = morph(args.hot, args.field, settings, units=args.field_units, field_name=args.field_name,
+                           invert=args.invert, progress=progress, check=False)   # write_cold checks
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
