@@ -13,7 +13,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from hot2cold import export
+from hot2cold.io import export
 from hot2cold.errors import OutputError
 from hot2cold.pipeline.classify import IGNORED
 from hot2cold.cli.commands import _Progress, main
