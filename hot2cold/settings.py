@@ -1,8 +1,9 @@
 """The tolerances and switches of a morph, in one explicit, documented record.
 
 A :class:`Settings` is passed down through every step; no step reads module-level state, and nothing here
-touches OpenCascade's global settings.  Lengths are in millimetres.  Where a length is ``None`` it is taken
-relative to the part: the ``*_rel`` factor times the diagonal of the part's bounding box.
+touches OpenCascade's global settings (nor, by default, the process's BLAS threads: ``blas_threads``).
+Lengths are in millimetres.  Where a length is ``None`` it is taken relative to the part: the ``*_rel``
+factor times the diagonal of the part's bounding box.
 """
 from __future__ import annotations
 
@@ -53,10 +54,13 @@ class Settings:
         face's fit (keeps trimmed faces on their edges).
     blas_threads : int or None
         Threads the BLAS/LAPACK library (OpenBLAS, MKL) may use while the morph runs, set through
-        ``threadpoolctl`` for the call only.  The fits are many small dense problems that gain nothing from
-        threads, and on a busy machine the threads spin against each other: Rotor 37 with 36 000 nodes on
-        this 2-core machine with a second job running, edges 22 s and faces 10 s with OpenBLAS's default
-        threads, 0.5 s and 2.5 s with one.  None leaves the library as it is.
+        ``threadpoolctl`` for the duration of the call.  The limit is process-wide: while it holds, every
+        other thread of the process (a Dask worker's other tasks, the caller's own numpy) gets it too.
+        The fits are many small dense problems that gain nothing from threads, and on a busy machine the
+        threads spin against each other: Rotor 37 with 36 000 nodes on this 2-core machine with a second job
+        running, edges 22 s and faces 10 s with OpenBLAS's default threads, 0.5 s and 2.5 s with one.
+        None (the default) leaves the library as it is; the ``hot2cold`` command holds its own process to
+        one thread around its morph.
     extrapolate : bool
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
@@ -74,7 +78,7 @@ class Settings:
     tolerance: float | None = None
     max_refinements: int = 4
     g1_angle: float | None = 1.0
-    blas_threads: int | None = 1
+    blas_threads: int | None = None
     extrapolate: bool = False
 
     def __post_init__(self):

@@ -408,6 +408,32 @@ def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
              r"the displacements are too large for this part .*; not written$", out)
 
 
+def _mirrored(box):
+    """The box's nodes and a field that takes x to -x: the box turned inside out."""
+    nodes = box[1]
+    return nodes, np.column_stack([-2.0 * nodes[:, 0], 0 * nodes[:, :2]])
+
+
+@pytest.mark.parametrize("case", ["inside out", "crossing"])
+def test_morph_from_python_refuses_an_invalid_part(case, tmp_path, box, out):
+    """From Python as from the command line: ``morph`` raises MorphError on a cold part that fails the
+    checks; with ``check=False`` it returns the part, whose report says so, and ``write_step`` refuses it
+    and leaves no file."""
+    from hot2cold import MorphError, morph
+
+    hot, field = (box[0], _mirrored(box)) if case == "inside out" else _bent_fork(tmp_path, 0.012)
+    what = (r"is turned inside out \(volume hot 1000 mm³, cold -1000 mm³\) \(and 4 more problems, see the log\)"
+            if case == "inside out" else r"crosses itself: .*")
+    refused = rf"^cold solid 0 {what}: the displacements are too large for this part .*; not written$"
+    with pytest.raises(MorphError, match=refused):
+        morph(hot, field)
+    result = morph(hot, field, check=False)
+    assert not result.report.valid and result.problems
+    with pytest.raises(MorphError, match=refused):
+        result.write_step(out)
+    assert _left(out.parent) == []
+
+
 def test_bent_fork_that_does_not_cross_is_written(tmp_path, out, capsys):
     """The same fork bent less: the gap closes by more than half, the kernel is asked, and it is fine."""
     hot, field = _bent_fork(tmp_path, 0.004)

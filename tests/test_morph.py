@@ -8,6 +8,7 @@ from hot2cold.core.bspline import evaluate_surface
 from hot2cold.core.model import Role
 from hot2cold.kernel.convert import surface_to_record
 from hot2cold.kernel.step import read_step
+from hot2cold.kernel.topology import bspline_surface
 from hot2cold.pipeline.morph import morph
 from hot2cold.testing.synthetic import AffineField, UntwistField, ZeroField
 
@@ -20,8 +21,7 @@ UNTWIST = UntwistField(axis_point=(0.0, 0.0, 0.0), untwist_deg_per_mm=0.02, stre
 
 def _cold_poles(result) -> list[np.ndarray]:
     """Control nets read back from the cold kernel shape (not from the numeric records)."""
-    from hot2cold.kernel.topology import bspline_surface
-    return [surface_to_record(*bspline_surface(face)).poles for face in result.part.kernel.faces]
+    return [surface_to_record(*bspline_surface(face)).poles for face in result.cold_kernel.faces]
 
 
 @pytest.mark.parametrize("part", ["block", "blade"])
@@ -167,3 +167,29 @@ def test_g1_edges_are_reported_and_not_worsened(blade_shape, blade_nodes):
     assert len(g1) == 4                                   # the blade's four span-wise tangent edges
     assert all(g["kink_after_max"] <= g["kink_before_max"] + 1e-9 for g in g1)
     assert max(g["kink_after_max"] for g in g1) < 0.05    # degrees
+
+
+def test_hot_part_kept_and_blas_left_alone_unless_asked(block_shape, block_nodes):
+    """The hot part's kernel shape is left as loaded (the cold geometry goes into a copy the result holds),
+    and BLAS keeps its threads during a morph unless ``Settings.blas_threads`` is set."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from hot2cold.settings import Settings
+
+    def blas_threads():
+        return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+
+    seen = {}
+    with threadpool_limits(2, "blas"):
+        if blas_threads() != {2}:
+            pytest.skip("no BLAS that threadpoolctl can set to 2 threads")
+        for threads in (None, 1):
+            result = morph(block_shape, (block_nodes, THERMAL(block_nodes)), Settings(blas_threads=threads),
+                           progress=lambda stage, *_: seen.setdefault(threads, blas_threads()))
+        assert blas_threads() == {2}
+    assert seen == {None: {2}, 1: {1}}
+    hot = [surface_to_record(*bspline_surface(face)).poles for face in result.part.kernel.faces]
+    for face, poles, cold in zip(result.part.faces, hot, _cold_poles(result)):
+        assert np.array_equal(poles, face.surface.poles)                 # the hot part's kernel, as loaded
+        assert np.abs(cold - poles).max() > 1e-3                          # the cold one, moved
+    assert result.cold.wrapped.IsSame(result.cold_kernel.shape)

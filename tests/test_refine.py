@@ -296,7 +296,7 @@ def test_edges_and_the_faces_sharing_them_are_refined_together():
             edge = result.edges[use.edge].curve
             poles = edge.poles[::-1] if backwards else edge.poles
             assert np.abs(row - poles).max() <= 1e-9                  # the face's row is the edge, pole for pole
-            assert _gap(part.kernel.edges[use.edge], part.kernel.faces[k]) <= 1e-9
+            assert _gap(result.cold_kernel.edges[use.edge], result.cold_kernel.faces[k]) <= 1e-9
             shared += 1
     assert shared == 4
     check_result(result)
@@ -343,7 +343,7 @@ def test_refined_trimmed_band_face_stays_on_its_edges_and_keeps_the_volume():
     assert refined.report.tolerance_met
     assert {r["face"] for r in refined.report.refinements} == set(bands)
     check_result(refined)
-    kernel = refined.part.kernel
+    kernel = refined.cold_kernel
     for k in bands:                        # each edge of the refined faces lies on them, densely sampled
         for use in refined.part.faces[k].uses:
             edge = kernel.edges[use.edge]

@@ -205,6 +205,8 @@ def _write_exports(args, result):
 
 
 def _morph(args) -> int:
+    from threadpoolctl import threadpool_limits
+
     from .run import run_morph, tolerance_missed, write_cold
 
     check_input_file(args.hot, "STEP file")            # refused before anything is loaded
@@ -215,7 +217,8 @@ def _morph(args) -> int:
         _html_writer()
     progress = None if args.quiet else _Progress(sys.stderr)
     try:
-        result = run_morph(args.hot, args.field, MorphOptions.from_args(args), progress)
+        with threadpool_limits(1, "blas"):  # this process's BLAS: the small fits gain nothing from threads
+            result = run_morph(args.hot, args.field, MorphOptions.from_args(args), progress)
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:

@@ -17,10 +17,11 @@ from .options import MorphOptions
 
 def run_morph(hot, field, options: MorphOptions, progress=None):
     """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path) with ``field`` (field file path) under
-    ``options``; returns the :class:`~hot2cold.pipeline.morph.MorphResult`."""
+    ``options``; returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked: :func:`write_cold`
+    writes the report first and then refuses an invalid part."""
     from ..pipeline.morph import morph
 
-    return morph(hot, field, options.to_settings(), **options.morph_arguments(), progress=progress)
+    return morph(hot, field, options.to_settings(), **options.morph_arguments(), progress=progress, check=False)
 
 
 def write_json(data: dict, path: str | os.PathLike) -> None:
@@ -37,13 +38,10 @@ def write_cold(result, output: str | os.PathLike, report: str | os.PathLike | No
     """Write what a morph gives: the JSON report (if asked; written even for an invalid part), then, once
     :func:`~hot2cold.pipeline.morph.check_result` passes, the cold STEP.  ``result`` is the morph's
     :class:`~hot2cold.pipeline.morph.MorphResult`, already made.  Yields each path as it is written; raises
-    :class:`MorphError` (invalid part) or :class:`OutputError`."""
-    from ..pipeline.morph import check_result
-
+    :class:`MorphError` (invalid part: ``write_step`` checks it) or :class:`OutputError`."""
     if report is not None:
         write_json(result.report.to_dict(), report)
         yield Path(report)
-    check_result(result)
     result.write_step(output)
     yield Path(output)
 

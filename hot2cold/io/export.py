@@ -83,7 +83,7 @@ def cold_surface(result, deflection: float | None = None) -> ColdSurface:
     """
     from ..kernel.tessellate import tessellate
 
-    mesh = tessellate(result.cold.wrapped, deflection)
+    mesh = tessellate(result.cold_kernel.shape, deflection)
     displacement = (points_on_faces([fm.surface for fm in result.faces], mesh)
                     - points_on_faces([face.surface for face in result.part.faces], mesh))
     return ColdSurface(mesh.vertices, mesh.triangles, mesh.face, mesh.uv, displacement)

@@ -3,8 +3,8 @@
 Kernel failures become :class:`hot2cold.errors.KernelError` (or :class:`~hot2cold.errors.StepReadError`)
 here.  Modules: :mod:`.step` and :mod:`.xcaf` (STEP in and out), :mod:`.topology` (NURBS conversion and
 decomposition into the core's records), :mod:`.convert` (records <-> ``Geom_BSpline*``), :mod:`.project`
-(the kernel's foot points and trimmed-domain classification), :mod:`.rebuild` (cold poles into the
-kernel's copy), :mod:`.tolerances` (edge and vertex tolerances fitted to the gaps), :mod:`.validity`
-(BRepCheck, volumes, self-intersection), :mod:`.tessellate`, :mod:`.shapes` (CadQuery <-> TopoDS) and
-:mod:`.sampling` (points on and in a solid, for tests and benchmarks).
+(the kernel's foot points and trimmed-domain classification), :mod:`.rebuild` (cold poles into a
+copy of the hot part's kernel shape), :mod:`.tolerances` (edge and vertex tolerances fitted to the
+gaps), :mod:`.validity` (BRepCheck, volumes, self-intersection), :mod:`.tessellate`, :mod:`.shapes`
+(CadQuery <-> TopoDS) and :mod:`.sampling` (points on and in a solid, for tests and benchmarks).
 """

@@ -1,25 +1,48 @@
-"""Rebuilding the cold part: the morphed poles written into the kernel's working copy.
+"""Rebuilding the cold part: the morphed poles written into a fresh copy of the hot part's kernel shape.
+
+The hot part (:class:`~hot2cold.kernel.topology.KernelPart`) stays as it was loaded: :func:`rebuild` copies
+its working shape, geometry included, and returns the copy as a :class:`ColdKernel`, which
+:func:`~hot2cold.kernel.tolerances.fit_tolerances`, the checks and the writers then take.
 
 Only poles move (same degrees, knots and weights; a face or edge refined to meet a tolerance first gets the
 refined record's higher degree and extra knots, which leaves its shape as it was), and they move in the very
-geometry objects the working copy's faces and edges hold, so the topology of the hot part is kept: every edge
+geometry objects the cold copy's faces and edges hold, so the topology of the hot part is kept: every edge
 is still one edge used by both of its faces, every vertex one vertex.  Vertices are moved to the ends of their
 morphed edges.
 """
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
+from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy
 from OCP.gp import gp_Pnt
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX
+from OCP.TopoDS import TopoDS_Shape
 
 from ..core.bspline import BSplineCurve, BSplineSurface
 from ..errors import KernelError
 from .convert import set_curve_poles, set_surface_poles
-from .topology import KernelPart
+from .topology import KernelPart, bspline_curve, bspline_surface, shape_map
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class ColdKernel:
+    """The cold part's kernel shape: a copy of the hot part's working shape with the morphed geometry.
+
+    ``faces``, ``edges`` and ``vertices`` are the sub-shapes of ``shape`` in the part's numbering (face ``k``
+    of the hot part is face ``k`` here); the morph changes only their geometry, and
+    :func:`~hot2cold.kernel.tolerances.fit_tolerances` their tolerances.
+    """
+
+    shape: TopoDS_Shape
+    faces: list
+    edges: list
+    vertices: list
 
 
 def _insert_missing(flat: list, knots, insert) -> None:
@@ -52,11 +75,12 @@ def _refine_curve(curve, record: BSplineCurve) -> None:
 
 
 def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSplineCurve | None],
-            vertices: np.ndarray) -> None:
-    """Write morphed geometry into ``kernel.work`` in place.
+            vertices: np.ndarray) -> ColdKernel:
+    """The cold kernel shape: a copy of ``kernel.work`` (which is left as it is) with the morphed geometry.
 
     Parameters
     ----------
+    kernel : the hot part's kernel side.
     surfaces : one morphed surface per face, in the part's numbering.
     curves : one morphed curve per edge (None for degenerate edges).
     vertices : (nv, 3) morphed vertex points.
@@ -65,18 +89,28 @@ def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSp
         raise KernelError(f"rebuild needs {len(kernel.faces)} surfaces and {len(kernel.edges)} curves, "
                           f"got {len(surfaces)} and {len(curves)}")
     try:
-        for (surface, trsf), record in zip(kernel.surfaces, surfaces):
+        # the copy has the work shape's tree, so its TopExp numbering is the part's
+        shape = BRepBuilderAPI_Copy(kernel.work, True, False).Shape()
+        cold = ColdKernel(shape, shape_map(shape, TopAbs_FACE), shape_map(shape, TopAbs_EDGE),
+                          shape_map(shape, TopAbs_VERTEX))
+        if (len(cold.faces), len(cold.edges), len(cold.vertices)) != (
+                len(kernel.faces), len(kernel.edges), len(kernel.vertices)):
+            raise KernelError("the copy of the part for the cold geometry has other faces, edges or vertices")
+        for face, record in zip(cold.faces, surfaces):
+            surface, trsf = bspline_surface(face)
             _refine_surface(surface, record)
             set_surface_poles(surface, record.poles, trsf)
-        for entry, record in zip(kernel.curves, curves):
-            if entry is not None:
-                _refine_curve(entry[0], record)
-                set_curve_poles(entry[0], record.poles, entry[1])
+        for edge, hot, record in zip(cold.edges, kernel.curves, curves):
+            if hot is not None:
+                curve, trsf = bspline_curve(edge)
+                _refine_curve(curve, record)
+                set_curve_poles(curve, record.poles, trsf)
         builder = BRep_Builder()
-        for vertex, point in zip(kernel.vertices, np.asarray(vertices, float)):
+        for vertex, point in zip(cold.vertices, np.asarray(vertices, float)):
             builder.UpdateVertex(vertex, gp_Pnt(*point), BRep_Tool.Tolerance_s(vertex))
     except KernelError:
         raise
     except Exception as exc:
         raise KernelError(f"rebuilding the cold geometry failed: {exc}") from exc
     log.info("rebuilt %d faces, %d edges, %d vertices", len(surfaces), len(curves), len(vertices))
+    return cold

@@ -21,7 +21,7 @@ from OCP.TopTools import TopTools_IndexedMapOfShape
 from OCP.TopoDS import TopoDS
 
 from ..errors import KernelError
-from .topology import KernelPart
+from .rebuild import ColdKernel
 
 log = logging.getLogger(__name__)
 
@@ -36,18 +36,19 @@ def _gap(edge, face, n: int) -> float:
     return gap
 
 
-def fit_tolerances(kernel: KernelPart, samples: int = 51, margin: float = 1.5) -> np.ndarray:
-    """Fit edge and vertex tolerances of ``kernel.work`` to the morphed geometry.
+def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5) -> np.ndarray:
+    """Fit edge and vertex tolerances of the cold shape ``cold`` (from :func:`~hot2cold.kernel.rebuild.rebuild`,
+    changed in place) to the morphed geometry.
 
     Returns the gap ``(n_edges,)`` in mm of every edge: the largest distance, over ``samples`` points, between
     its 3D curve and the surface of any face it bounds.  Edge tolerances become at least ``margin`` times
     that gap.
     """
     edge_index = TopTools_IndexedMapOfShape()
-    TopExp.MapShapes_s(kernel.work, TopAbs_EDGE, edge_index)
-    gaps = np.zeros(len(kernel.edges))
+    TopExp.MapShapes_s(cold.shape, TopAbs_EDGE, edge_index)
+    gaps = np.zeros(len(cold.edges))
     try:
-        for face in kernel.faces:
+        for face in cold.faces:
             explorer = TopExp_Explorer(face, TopAbs_EDGE)
             while explorer.More():
                 edge = TopoDS.Edge_s(explorer.Current())
@@ -57,10 +58,10 @@ def fit_tolerances(kernel: KernelPart, samples: int = 51, margin: float = 1.5) -
                 e = edge_index.FindIndex(edge) - 1
                 gaps[e] = max(gaps[e], _gap(edge, face, samples))
         builder = BRep_Builder()
-        for e, edge in enumerate(kernel.edges):
+        for e, edge in enumerate(cold.edges):
             if margin * gaps[e] > BRep_Tool.Tolerance_s(edge):
                 builder.UpdateEdge(edge, margin * gaps[e])
-        BRepLib.UpdateTolerances_s(kernel.work, False)
+        BRepLib.UpdateTolerances_s(cold.shape, False)
     except Exception as exc:
         raise KernelError(f"fitting the cold part's tolerances failed: {exc}") from exc
     log.info("sewed: largest edge gap %.3g mm", gaps.max() if len(gaps) else 0.0)

@@ -1,9 +1,11 @@
 """Decomposing a solid into B-spline faces, shared edges and vertices.
 
 The input is converted to B-spline form (planes, cylinders, cones, tori, fillets and surfaces of revolution
-included) with ``BRepBuilderAPI_NurbsConvert`` and copied twice: ``hot`` stays as it is, ``work`` is the
-copy the morph later moves in place.  Every face keeps its edges by reference, so the two faces of a shared
-edge see the very same edge before and after the morph: this is what keeps the cold solid watertight.
+included) with ``BRepBuilderAPI_NurbsConvert`` and copied: ``hot`` is the converted part, ``work`` its copy
+whose faces and edges the morph projects onto; neither is changed by the morph, whose rebuild
+(:mod:`hot2cold.kernel.rebuild`) writes the cold geometry into a further copy of ``work``.  Every face keeps
+its edges by reference, so the two faces of a shared edge see the very same edge before and after the
+morph: this is what keeps the cold solid watertight.
 
 Geometry is normalised so that the numeric core can treat it uniformly: periodic surfaces and curves become
 non-periodic, and every surface and edge curve is clamped (end poles on the boundary); an edge curve is
@@ -36,7 +38,8 @@ log = logging.getLogger(__name__)
 
 @dataclass(eq=False)
 class KernelPart:
-    """The kernel side of a :class:`~hot2cold.model.Part` (opaque to the numeric core).
+    """The kernel side of a :class:`~hot2cold.model.Part` (opaque to the numeric core), as loaded: the morph
+    does not change it (the cold part is a :class:`~hot2cold.kernel.rebuild.ColdKernel`).
 
     ``faces``, ``edges`` and ``vertices`` are shapes of ``work`` in the part's numbering; ``surfaces`` and
     ``curves`` are their geometry handles with the location that places them (``None`` for degenerate

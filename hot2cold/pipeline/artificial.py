@@ -10,11 +10,11 @@ polynomials over foot points around it instead:
   does, but it does not depend on which three points are nearest (three nearly collinear foot points make
   the paper's triangle degenerate and its extrapolation explode), and it averages the noise of many nodes;
 * a quadratic correction, weighted by how well the quadratic terms describe the field over the neighbourhood
-  (:func:`hot2cold.core.localfit.fits_at`).  A smooth field (thermal strain, an untwist, a span-wise stretch) is nearly quadratic
-  at the scale of a part, and the linear fit alone misses its curvature: on Rotor 37 with an untwist field
-  it was 1e-3 mm off at the artificial nodes 2 to 3 mm beyond the aerofoil faces' trims, the quadratic one
-  2e-6 mm.  A real FE field need not be (Rotor 37's CalculiX field, clamped at the hub, is not), and there
-  the correction is left out;
+  (:func:`hot2cold.core.localfit.fits_at`).  A smooth field (thermal strain, an untwist, a span-wise
+  stretch) is nearly quadratic at the scale of a part, and the linear fit alone misses its curvature: on
+  Rotor 37 with an untwist field it was 1e-3 mm off at the artificial nodes 2 to 3 mm beyond the aerofoil
+  faces' trims, the quadratic one 2e-6 mm.  A real FE field need not be (Rotor 37's CalculiX field, clamped
+  at the hub, is not), and there the correction is left out;
 * neighbourhoods that grow with the distance.  The ``k`` nearest foot points of a point 10 to 25 mm out on
   the hub surface of Rotor 37 are a cluster a few mm across, thin across the blade, and a fit over them
   extrapolated its noise and curvature by the ratio of the two: 0.3 to 0.9 mm off a smooth field of 0.7 mm,

@@ -4,8 +4,9 @@
 * :func:`check_coverage`: the field lies on the part, in the part's units, and covers every face (else
   :class:`FieldError`, or a warning with ``Settings.extrapolate``);
 * :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself;
-* :func:`check_result`: what the CLI and pipelines call before writing: refuses a result that failed any of
-  them or that the kernel finds invalid or open (:class:`MorphError`).
+* :func:`check_result`: refuses a result that failed any of them or that the kernel finds invalid or open
+  (:class:`MorphError`); :func:`~hot2cold.pipeline.morph.morph` calls it (unless ``check=False``) and so does
+  :meth:`~hot2cold.pipeline.morph.MorphResult.write_step` before it writes.
 """
 from __future__ import annotations
 
@@ -20,9 +21,10 @@ from ..errors import FieldError, InputError, MorphError
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
-from ..kernel.project import Projector
 from ..core.domain import Trim
 from ..core.model import Classification, Part, Role
+from ..kernel.project import Projector
+from ..kernel.rebuild import ColdKernel
 from ..settings import Settings
 
 if TYPE_CHECKING:
@@ -121,8 +123,8 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     # a solid of several without a node is named as a whole, other faces one by one with a point on them
     bare = [s for s, faces in enumerate(part.solids)
             if len(part.solids) > 1 and len(faces) > 1 and set(faces) <= set(empty.tolist())]
-    names = [f"solid {s} (faces {min(part.solids[s])}-{max(part.solids[s])}, {expected[list(part.solids[s])].sum():.0f})"
-             for s in bare]
+    names = [f"solid {s} (faces {min(part.solids[s])}-{max(part.solids[s])}, "
+             f"{expected[list(part.solids[s])].sum():.0f})" for s in bare]
     for k in empty:
         face = part.faces[k]
         if face.solid not in bare:
@@ -148,13 +150,14 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
 _CHECK_SPACING, _CHECK_MOST = 1 / 150, 200
 
 
-def check_cold(part: Part, face_morphs: list[FaceMorph], projector: Projector, hot_checks: list[SolidCheck],
-                cold_checks: list[SolidCheck]) -> dict[int, list[str]]:
-    """What is wrong with the cold part, per solid: turned inside out (its volume changed sign), a face folded
-    over (somewhere on a grid over its trimmed domain the normal ``S_u x S_v`` of the cold surface points
-    against the hot one's), or crossing itself.
+def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,
+               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck]) -> dict[int, list[str]]:
+    """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
+    solid: turned inside out (its volume changed sign), a face folded over (somewhere on a grid over its
+    trimmed domain the normal ``S_u x S_v`` of the cold surface points against the hot one's), or crossing
+    itself.  ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid.
 
-    The last is the kernel's self-interference test (:func:`~hot2cold.kernel.check.self_intersections`),
+    The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
     1 to 3 s on the bundled real parts, so it is run only where a gap of the part may have closed: two
     points of the grids closer than two sample spacings in the cold part that were more than twice as far
     apart, and a sample spacing farther, in the hot one.  A field moves a part as the FE solution says, and
@@ -190,7 +193,7 @@ def check_cold(part: Part, face_morphs: list[FaceMorph], projector: Projector, h
         if closing:
             log.info("%d pairs of points came closer than half their hot distance: checking the cold part for "
                      "self-intersection", closing)
-            _check_crossing(part, problems)
+            _check_crossing(part, cold_kernel, problems)
     for s in sorted(problems):
         for text in problems[s]:
             log.warning("cold solid %d %s", s, text)
@@ -252,11 +255,11 @@ def _points_and_normals(hot, cold, uv: np.ndarray):
     return hot_out, evaluate(cold, bases if same else None)[1]
 
 
-def _check_crossing(part: Part, problems: dict[int, list[str]]) -> None:
+def _check_crossing(part: Part, cold_kernel: ColdKernel, problems: dict[int, list[str]]) -> None:
     """Add to ``problems`` the crossings the kernel finds in the cold part and not in the hot one (where the
     hot part has them too, e.g. two solids of an assembly that touch, they are the input's: a warning)."""
     touch = 1e-6 * part.diagonal
-    found = self_intersections(part.kernel.work, touch)
+    found = self_intersections(cold_kernel.shape, touch)
     if not found:
         log.info("no self-intersection in the cold part")
         return

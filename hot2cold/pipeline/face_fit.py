@@ -4,15 +4,16 @@ A face's boundary rows of poles come from its morphed edges wherever an edge run
 the surface's domain with the same degree, knots and weights as that row (for an untrimmed face the four
 sides u=0, u=1, v=0, v=1 are its edges, eq. 32-36): those rows take the edge's pole displacements
 exactly, so the two faces of an edge meet as they met when hot (the rows and the edge's poles agree to
-rounding in a B-spline-converted part; a zero field leaves every pole bit for bit where it was).  The remaining poles solve eq. (38),
+rounding in a B-spline-converted part; a zero field leaves every pole bit for bit where it was).  The
+remaining poles solve eq. (38),
 
     sum_{i,j free} N_i(u_k) N_j(v_k) dp_ij = dd_k - sum_{i,j fixed} N_i(u_k) N_j(v_k) dp_ij,
 
 over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20).
 Edges that are not a whole side (trimmed faces, split sides) add rows that hold the surface to the morphed
-edge at points along the edge's curve on the face, and knot-span patches with too few data get artificial nodes (eq. 39) so that
-no pole is left undetermined.  Artificial rows carry the weight ``Settings.artificial_weight`` (< 1): they
-settle what the FE nodes leave open and yield where FE nodes speak.
+edge at points along the edge's curve on the face, and knot-span patches with too few data get artificial
+nodes (eq. 39) so that no pole is left undetermined.  Artificial rows carry the weight
+``Settings.artificial_weight`` (< 1): they settle what the FE nodes leave open and yield where FE nodes speak.
 """
 from __future__ import annotations
 

@@ -529,7 +529,8 @@ def _spread(normals: dict) -> float:
 
 def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
                     noise_deg: float = 1e-6, anchors: dict | None = None,
-                    decided: set[tuple[int, int]] | None = None) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
+                    decided: set[tuple[int, int]] | None = None
+                    ) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
     """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
 
     Parameters

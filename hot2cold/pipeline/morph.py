@@ -1,11 +1,16 @@
 """The hot-to-cold morph, end to end, in the order of the paper.
 
 load -> classify nodes -> edges (one tangent plane at the corners of tangent edges) -> faces (with
-artificial nodes; refined to a tolerance if one is set) -> G1 -> rebuild -> sew -> report
+artificial nodes; refined to a tolerance if one is set) -> G1 -> rebuild -> sew -> check -> report
 
 The input is checked on the way (an open hot solid, a field that misses the part or some of its faces) and
 so is the cold part after the sew (a face folded over, a solid turned inside out or crossing itself):
-:mod:`hot2cold.checks`; :func:`check_result` (re-exported here) refuses what the morph has found wrong.
+:mod:`hot2cold.pipeline.checks`.  :func:`morph` raises :class:`~hot2cold.errors.MorphError` on a cold part
+that fails them (:func:`check_result`, re-exported here), unless asked not to (``check=False``, for
+inspection); :meth:`MorphResult.write_step` never writes such a part.
+
+The hot part stays as it was loaded: the rebuild writes the cold geometry into a copy of its kernel shape
+(:class:`~hot2cold.kernel.rebuild.ColdKernel`), which the result holds.
 """
 from __future__ import annotations
 
@@ -14,6 +19,7 @@ import os
 import time
 from contextlib import nullcontext
 from dataclasses import asdict, dataclass, replace
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -25,23 +31,23 @@ from .classify import classify_nodes
 from .edge_fit import EdgeMorph, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
-from .g1 import (correct_corners, correct_g1, edge_decided, kink_added, surface_corner_normals, tangent_edges,
-                 with_corners)
+from .g1 import (CornerReport, G1Report, TangentEdge, correct_corners, correct_g1, edge_decided, kink_added,
+                 surface_corner_normals, tangent_edges, with_corners)
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
-from ..kernel.rebuild import rebuild
+from ..kernel.rebuild import ColdKernel, rebuild
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.shapes import to_cadquery
 from ..kernel.step import write_step
 from .load import load_part
 from ..core.domain import Trim
-from ..core.model import Classification, Part, Role
+from ..core.model import Classification, Face, Part, Role
 from .refine import refine
-from .report import Report, build_report, node_errors
+from .report import Checks, Fits, Report, build_report, node_errors
 from ..settings import Settings
 
-__all__ = ["MorphResult", "Progress", "check_result", "morph"]
+__all__ = ["MorphContext", "MorphResult", "Progress", "check_result", "morph"]
 
 log = logging.getLogger(__name__)
 
@@ -58,20 +64,22 @@ class MorphResult:
 
     Attributes
     ----------
-    cold : cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one.
-    hot : cadquery.Shape, the hot part in B-spline form, parameterised as the cold one.
     report : Report, accuracy and checks.
-    part, classification, faces, edges : the intermediate records, for inspection.
+    part, classification, faces, edges : the intermediate records, for inspection (``part`` is the hot part,
+        refined where a tolerance asked for it; its kernel side is the hot part's as loaded).
     field : DisplacementField, the field used (hot positions and hot-to-cold displacements, inverted if
         asked).
     node_errors : (N,) float array, each node's distance (mm) to the cold part (eq. 21); NaN where ignored.
+    cold_kernel : ColdKernel, the cold part's kernel shape with its faces, edges and vertices in the part's
+        numbering (``cold`` wraps its shape).
     problems : tuple of str, what the checks after the sew found wrong with the cold part (a face folded
         over, a solid turned inside out or crossing itself; such solids are reported invalid), one line each;
         :func:`check_result` raises on them.
+
+    ``cold`` and ``hot`` are the parts as CadQuery shapes, made when first asked for (CadQuery and VTK take
+    about 1.5 s to import, which a morph on the command line does not need).
     """
 
-    cold: object
-    hot: object
     report: Report
     part: Part
     classification: Classification
@@ -79,7 +87,18 @@ class MorphResult:
     edges: list[EdgeMorph]
     field: DisplacementField
     node_errors: np.ndarray
+    cold_kernel: ColdKernel
     problems: tuple[str, ...] = ()
+
+    @cached_property
+    def cold(self):
+        """cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one."""
+        return to_cadquery(self.cold_kernel.shape)
+
+    @cached_property
+    def hot(self):
+        """cadquery.Shape, the hot part in B-spline form, parameterised as the cold one."""
+        return to_cadquery(self.part.kernel.hot)
 
     def write_step(self, path: str | os.PathLike) -> None:
         """Write the cold part to a STEP file (atomically).
@@ -87,21 +106,165 @@ class MorphResult:
         When the hot STEP carried names or colours, the cold file is written through XCAF with the hot
         file's assembly tree and the names and colours of its solids and faces (hot solid i is cold
         solid i, hot face k cold face k); otherwise as a plain shape.
+
+        Raises
+        ------
+        MorphError : the cold part fails :func:`check_result` (a result of ``morph(..., check=False)``);
+            nothing is written.
         """
         from ..kernel.xcaf import write_step_styles
 
+        check_result(self)
         styles = self.part.styles
         if styles is not None and styles.placed:
-            write_step_styles(self.cold.wrapped, styles, path)
+            write_step_styles(self.cold_kernel.shape, styles, path)
             return
         if styles is not None:
             log.warning("the hot STEP's names and colours could not be placed on the cold part; "
                         "writing %s without them", path)
-        write_step(self.cold.wrapped, path)
+        write_step(self.cold_kernel.shape, path)
+
+
+@dataclass(frozen=True, eq=False)
+class MorphContext:
+    """What every fit of one morph reads (METHOD steps 3-6), and the fits as methods.
+
+    Attributes
+    ----------
+    part : Part, the hot part; after the refinement to a tolerance the refined one (same shape).
+    classification : Classification of the field's nodes (roles, owners, foot points, eq. 4, 27).
+    field : DisplacementField, hot positions ``(N, 3)`` and hot-to-cold displacements ``(N, 3)``.
+    vertex_displacements : (nv, 3) float array, each vertex's displacement, the fixed ends of its edges
+        (eq. 10).
+    estimator : FieldEstimator, the displacements of artificial nodes (eq. 39).
+    settings : Settings.
+    projector : Projector onto the hot faces and edges; tells which parameters a face's trim cuts away.
+    tangent : list of TangentEdge, the edges along which the hot faces meet tangentially (empty without G1
+        correction, ``Settings.g1_angle`` None).
+    """
+
+    part: Part
+    classification: Classification
+    field: DisplacementField
+    vertex_displacements: np.ndarray
+    estimator: FieldEstimator
+    settings: Settings
+    projector: Projector
+    tangent: list[TangentEdge]
+
+    @classmethod
+    def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
+           projector: Projector) -> MorphContext:
+        """The context of a classified field: the vertex displacements (eq. 10) from the nodes on or near
+        the vertices, an estimator over the used nodes' foot points, the tangent edges."""
+        used = classification.used
+        estimator = FieldEstimator(classification.foot[used], field.displacements[used],
+                                   settings.vertex_neighbours)
+        vertex_disp = vertex_displacements(part, classification, field, estimator)
+        tangent = [] if settings.g1_angle is None else tangent_edges(part, settings.g1_angle)
+        return cls(part, classification, field, vertex_disp, estimator, settings, projector, tangent)
+
+    def trimmed_away(self, k: int, uv: np.ndarray) -> np.ndarray:
+        """``(m,)`` bool: which of the parameters ``uv (m, 2)`` lie outside face ``k``'s trimmed domain."""
+        return self.projector.classify(k, uv) == Trim.OUTSIDE
+
+    def fit_edges(self) -> tuple[list[EdgeMorph], list[CornerReport]]:
+        """Every edge morphed (eq. 10-20), and at the ends of tangent edges given one tangent plane per corner
+        (paper section 5); returns the edge morphs and the corner reports."""
+        edge_morphs = morph_edges(self.part, self.classification, self.field, self.vertex_displacements,
+                                  self.estimator, self.settings)
+        if not self.tangent:
+            return edge_morphs, []
+        curves, corners = correct_corners(self.part, [e.curve for e in edge_morphs], self.tangent,
+                                          _KINK_NOISE_DEG, decided=edge_decided(self.part))
+        return [replace(e, curve=c) for e, c in zip(edge_morphs, curves)], corners
+
+    def fit_faces(self, edge_morphs: list[EdgeMorph], progress: Callable[[int, int], None] | None = None
+                  ) -> list[FaceMorph]:
+        """Every face morphed against the morphed edges (eq. 23-38, artificial nodes eq. 39)."""
+        return morph_faces(self.part, self.classification, self.field, edge_morphs, self.vertex_displacements,
+                           self.estimator, self.settings, trimmed_away=self.trimmed_away, progress=progress)
+
+    def fit_face(self, part: Part, face: Face, edge_morphs: list[EdgeMorph]) -> FaceMorph:
+        """One face of ``part`` (this context's part, or a refined one) morphed against ``edge_morphs``
+        (eq. 23-38); :func:`~hot2cold.pipeline.refine.refine`'s ``fit_face``."""
+        return morph_face(face, part, self.classification, self.field, edge_morphs, self.vertex_displacements,
+                          self.estimator, self.settings, self.trimmed_away)
+
+    def refit_edges(self, part: Part, edge_morphs: list[EdgeMorph], refined: set[int]) -> list[EdgeMorph]:
+        """The edges in ``refined`` of the refined ``part`` morphed again (eq. 10-20) and the corners of
+        tangent edges put right again; returns every edge's morph
+        (:func:`~hot2cold.pipeline.refine.refine`'s ``fit_edges``)."""
+        cls, settings = self.classification, self.settings
+        edge_morphs = list(edge_morphs)
+        for e in refined:
+            edge, nodes = part.edges[e], cls.nodes_of(Role.EDGE, e)
+            edge_morphs[e] = morph_edge(edge.curve, cls.t[nodes], self.field.displacements[nodes],
+                                        self.vertex_displacements[list(edge.vertices)], self.estimator,
+                                        settings.svd_epsilon, e, settings.artificial_weight)
+        if self.tangent:
+            curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent, _KINK_NOISE_DEG,
+                                        decided=edge_decided(part))
+            edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
+        return edge_morphs
+
+    def anchor_corners(self, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph]
+                       ) -> tuple[list[EdgeMorph], list[FaceMorph], list[CornerReport]]:
+        """Corners of tangent edges where a face's normal is not decided by its edges (a trimmed face, a
+        smooth boundary): the other faces' edges there turn into that face's fitted tangent plane, and the
+        faces of the edges that moved are fitted again.  Returns the edge morphs, the face morphs and the
+        corner reports."""
+        part = self.part
+        decided = edge_decided(part, [f.tied_sides for f in face_morphs])
+        pairs = {(v, k) for te in self.tangent for v in part.edges[te.edge].vertices for k in te.faces} - decided
+        anchors = surface_corner_normals(part, [f.surface for f in face_morphs], pairs)
+        if not anchors:
+            return edge_morphs, face_morphs, []
+        curves, corners = correct_corners(part, [e.curve for e in edge_morphs], self.tangent, _KINK_NOISE_DEG,
+                                          anchors, decided)
+        moved = {e for c in corners for e in c.edges}
+        edge_morphs = [replace(m, curve=curves[e]) if e in moved else m for e, m in enumerate(edge_morphs)]
+        # (a face refined to a tolerance keeps its fit: refitting would need its refined hot surface)
+        faces = [self.fit_face(part, face, edge_morphs)
+                 if moved & {u.edge for u in face.uses} and face_morphs[k].surface.shape == face.surface.shape
+                 else face_morphs[k] for k, face in enumerate(part.faces)]
+        return edge_morphs, faces, corners
+
+    def correct_g1(self, face_morphs: list[FaceMorph], corners: list[CornerReport]
+                   ) -> tuple[list[FaceMorph], list[G1Report]]:
+        """The kinks the morph added along tangent edges (and at their corners) removed from the faces
+        (eq. 56-75); returns the face morphs and one report per tangent edge."""
+        part = self.part
+        surfaces = [f.surface for f in face_morphs]
+        kinked = [e for e in self.tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG
+                  or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
+        surfaces, reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
+        return ([replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)],
+                with_corners(part, reports, corners))
+
+
+class _Stages:
+    """The wall time (s) of each stage of a morph, logged, and the caller's progress callback."""
+
+    def __init__(self, progress: Progress | None):
+        self.timings: dict[str, float] = {}
+        self._progress = progress
+        self._clock = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        """Close ``stage``: the time since the last lap is its time."""
+        now = time.perf_counter()
+        self.timings[stage] = round(now - self._clock, 4)
+        self._clock = now
+        log.info("%s done in %.2f s", stage, self.timings[stage])
+
+    def progress(self, stage: str, done: int = 1, total: int = 1) -> None:
+        if self._progress is not None:
+            self._progress(stage, done, total)
 
 
 def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", field_name: str | None = None,
-          invert: bool = False, progress: Progress | None = None) -> MorphResult:
+          invert: bool = False, progress: Progress | None = None, check: bool = True) -> MorphResult:
     """Morph the hot part with an FE displacement field into the cold part.
 
     Parameters
@@ -109,165 +272,107 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     hot : a STEP path, a CadQuery Shape/Workplane/Assembly or a ``TopoDS_Shape``; its solids are morphed.
     field : a field file path, a :class:`~hot2cold.field.DisplacementField`, or a pair
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
-    settings : tolerances (default :class:`Settings()`).
+    settings : tolerances (default :class:`Settings()`).  With ``settings.blas_threads`` set, the BLAS
+        library is held to that many threads while the morph runs, for the whole process.
     units : length unit of ``field`` when it is read or given as arrays ("mm" or "m").
     field_name : name of the displacement point field in a VTK/VTU (or other meshio) file.
     invert : the field goes cold to hot (given at the nodes of the hot mesh); it is inverted by fixed-point
         iteration first (:mod:`hot2cold.invert`) and the iteration's residual is reported.
     progress : optional callback ``progress(stage, done, total)``.
+    check : refuse a cold part that fails the checks (:func:`check_result`); False returns it as it is, for
+        inspection (its report says what is wrong; :meth:`MorphResult.write_step` still refuses it).
 
     Raises
     ------
-    StepReadError, FieldError : unusable input.
-    MorphError : the cold part is not a valid closed solid.
+    StepReadError, FieldError, InputError : unusable input.
+    MorphError : the cold part is not a valid closed solid, or it folds, is turned inside out or crosses
+        itself (unless ``check=False``).
     """
     settings = settings or Settings()
     limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
     with limit:
-        return _morph(hot, field, settings, units, field_name, invert, progress)
+        result = _morph(hot, field, settings, units, field_name, invert, progress)
+    if check:
+        check_result(result)
+    return result
 
 
 def _morph(hot, field, settings: Settings, units: str, field_name: str | None, invert: bool,
            progress: Progress | None) -> MorphResult:
-    """:func:`morph` within its BLAS thread limit."""
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = round(now - clock, 4)
-        clock = now
-        log.info("%s done in %.2f s", stage, timings[stage])
-
-    def report_progress(stage: str, done: int = 1, total: int = 1) -> None:
-        if progress is not None:
-            progress(stage, done, total)
-
+    """:func:`morph` within its BLAS thread limit, unchecked."""
+    stages = _Stages(progress)
     field = as_field(field, units, field_name)
     inversion = None
     if invert:
         field, inversion = invert_field(field)
-        lap("invert")
+        stages.lap("invert")
+
+    # load (METHOD step 1): the hot part in B-spline form, a closed solid
     part = load_part(hot, settings)
     hot_checks = check_solids(part.kernel.hot)
     check_hot(hot_checks)
-    lap("load")
-    report_progress("load")
+    stages.lap("load")
+    stages.progress("load")
 
+    # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     projector = Projector(part.kernel.faces, part.kernel.edges)
     cls = classify_nodes(part, field, settings, projector)
     check_coverage(part, cls, field, settings)
-    lap("classify")
-    report_progress("classify")
+    stages.lap("classify")
+    stages.progress("classify")
 
-    used = cls.used
-    estimator = FieldEstimator(cls.foot[used], field.displacements[used], settings.vertex_neighbours)
-    vertex_disp = vertex_displacements(part, cls, field, estimator)
-    edge_morphs = morph_edges(part, cls, field, vertex_disp, estimator, settings)
-    tangent = [] if settings.g1_angle is None else tangent_edges(part, settings.g1_angle)
-    corners = []
-    if tangent:
-        # The ends of tangent edges: one tangent plane per corner, on the edges the faces are then fitted to.
-        curves, corners = correct_corners(part, [e.curve for e in edge_morphs], tangent, _KINK_NOISE_DEG,
-                                          decided=edge_decided(part))
-        edge_morphs = [replace(e, curve=c) for e, c in zip(edge_morphs, curves)]
-    lap("edges")
-    report_progress("edges")
+    # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
+    context = MorphContext.of(part, cls, field, settings, projector)
+    edge_morphs, corners = context.fit_edges()
+    stages.lap("edges")
+    stages.progress("edges")
 
-    def trimmed_away(k, uv):
-        return projector.classify(k, uv) == Trim.OUTSIDE
+    # faces (steps 4-5, eq. 23-39): boundary rows from the edges, interior by truncated SVD
+    face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.progress("faces", done, total))
+    stages.lap("faces")
 
-    face_morphs = morph_faces(part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                              trimmed_away=trimmed_away,
-                              progress=lambda done, total: report_progress("faces", done, total))
-    lap("faces")
-
-    def fit(face):
-        return morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away)
-
-    refinements, edge_refinements = [], []
+    # refinement to a tolerance (opt-in, beyond the paper): knots and cubic degree where the error misses it;
+    # from here on the context's part is the refined hot part (same shape)
+    refinements, edge_refinements = (), ()
     if settings.tolerance is not None:
-        # Faces and edges refined (knots, cubic degree) where their error misses the tolerance; from here on
-        # ``part`` is the refined hot part (same shape), which ``fit`` and every later step see.
-        def fit_face(part_, face, edges_):
-            return morph_face(face, part_, cls, field, edges_, vertex_disp, estimator, settings, trimmed_away)
-
-        def fit_edges(part_, edges_, refined_edges):
-            edges_ = list(edges_)
-            for e in refined_edges:
-                edge, nodes = part_.edges[e], cls.nodes_of(Role.EDGE, e)
-                edges_[e] = morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
-                                       vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon, e,
-                                       settings.artificial_weight)
-            if tangent:
-                curves, _ = correct_corners(part_, [m.curve for m in edges_], tangent, _KINK_NOISE_DEG,
-                                            decided=edge_decided(part_))
-                edges_ = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edges_, curves)]
-            return edges_
-
-        refined = refine(part, cls, field, face_morphs, edge_morphs, settings.tolerance,
-                         settings.max_refinements, fit_face, fit_edges)
-        part, face_morphs, edge_morphs = refined.part, refined.faces, refined.edges
+        refined = refine(context.part, cls, field, face_morphs, edge_morphs, settings.tolerance,
+                         settings.max_refinements, context.fit_face, context.refit_edges)
+        context = replace(context, part=refined.part)
+        face_morphs, edge_morphs = refined.faces, refined.edges
         refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
-        lap("refine")
-    g1_reports = []
-    if tangent:
-        face_morphs, more = _anchored_corners(part, tangent, edge_morphs, face_morphs, fit)
-        corners += more
-        surfaces = [f.surface for f in face_morphs]
-        kinked = [e for e in tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG
-                  or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
-        surfaces, g1_reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
-        g1_reports = with_corners(part, g1_reports, corners)
-        face_morphs = [replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)]
-        lap("g1")
+        stages.lap("refine")
 
-    cold_vertices = part.vertices + vertex_disp
-    rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
-    lap("rebuild")
-    gaps = fit_tolerances(part.kernel)
-    cold_checks = check_solids(part.kernel.work)
-    lap("sew")
-    problems = check_cold(part, face_morphs, projector, hot_checks, cold_checks)
+    # G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges
+    g1_reports = ()
+    if context.tangent:
+        edge_morphs, face_morphs, more = context.anchor_corners(edge_morphs, face_morphs)
+        face_morphs, g1_reports = context.correct_g1(face_morphs, corners + more)
+        stages.lap("g1")
+    fits = Fits(face_morphs, edge_morphs, tuple(refinements), tuple(edge_refinements), tuple(g1_reports))
+
+    # rebuild, sew and check: the cold geometry in a copy of the kernel shape, tolerances fitted to its gaps
+    part = context.part
+    cold_vertices = part.vertices + context.vertex_displacements
+    cold = rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
+    stages.lap("rebuild")
+    gaps = fit_tolerances(cold)
+    cold_checks = check_solids(cold.shape)
+    stages.lap("sew")
+    problems = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks)
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
-    lap("check")
-    report_progress("sew")
+    stages.lap("check")
+    stages.progress("sew")
 
-    errors = node_errors(part, cls, field, cold_vertices, Projector(part.kernel.faces, part.kernel.edges),
+    # report (step 8, eq. 21-22): each node's cold target projected onto the morphed geometry
+    errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
                          [f.surface for f in face_morphs])
-    lap("report")
-    report = build_report(part, cls, field, face_morphs, edge_morphs, errors, gaps, hot_checks, cold_checks,
+    stages.lap("report")
+    report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-                          timings=timings, inversion=None if inversion is None else asdict(inversion),
-                          tolerance=settings.tolerance, refinements=[asdict(r) for r in refinements],
-                          edge_refinements=[asdict(r) for r in edge_refinements],
-                          g1=[asdict(r) for r in g1_reports])
-    report_progress("report")
-    result = MorphResult(cold=to_cadquery(part.kernel.work), hot=to_cadquery(part.kernel.hot), report=report,
-                         part=part, classification=cls, faces=face_morphs, edges=edge_morphs, field=field,
-                         node_errors=errors,
+                          timings=stages.timings, inversion=None if inversion is None else asdict(inversion))
+    stages.progress("report")
+    result = MorphResult(report=report, part=part, classification=cls, faces=face_morphs, edges=edge_morphs,
+                         field=field, node_errors=errors, cold_kernel=cold,
                          problems=tuple(f"cold solid {s} {text}" for s in sorted(problems) for text in problems[s]))
     log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
     return result
-
-
-def _anchored_corners(part: Part, tangent, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph], fit):
-    """Corners of tangent edges where a face's normal is not decided by its edges (a trimmed face, a smooth
-    boundary): the other faces' edges there turn into that face's fitted tangent plane, and the faces of
-    the edges that moved are fitted again.  ``edge_morphs`` is updated in place; returns the face morphs
-    and the corner reports."""
-    decided = edge_decided(part, [f.tied_sides for f in face_morphs])
-    pairs = {(v, k) for te in tangent for v in part.edges[te.edge].vertices for k in te.faces} - decided
-    anchors = surface_corner_normals(part, [f.surface for f in face_morphs], pairs)
-    if not anchors:
-        return face_morphs, []
-    curves, corners = correct_corners(part, [e.curve for e in edge_morphs], tangent, _KINK_NOISE_DEG,
-                                      anchors, decided)
-    moved = {e for c in corners for e in c.edges}
-    for e in moved:
-        edge_morphs[e] = replace(edge_morphs[e], curve=curves[e])
-    # (a face refined to a tolerance keeps its fit: refitting would need its refined hot surface)
-    faces = [fit(face) if moved & {u.edge for u in face.uses} and face_morphs[k].surface.shape == face.surface.shape
-             else face_morphs[k] for k, face in enumerate(part.faces)]
-    return faces, corners

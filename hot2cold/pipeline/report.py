@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,9 @@ from ..core.footpoint import project_to_surface
 from ..kernel.validity import SolidCheck
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
+
+if TYPE_CHECKING:
+    from .morph import MorphContext
 
 
 @dataclass(frozen=True)
@@ -226,33 +230,58 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
     return errors
 
 
-def build_report(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
-                 edge_morphs: list[EdgeMorph], errors: np.ndarray, gaps: np.ndarray,
-                 hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], hot_name: str = "",
-                 timings: dict[str, float] | None = None, inversion: dict | None = None,
-                 tolerance: float | None = None, refinements: list[dict] | None = None,
-                 edge_refinements: list[dict] | None = None,
-                 g1: list[dict] | None = None) -> Report:
-    """Assemble the :class:`Report` of a morph."""
+@dataclass(frozen=True, eq=False)
+class Fits:
+    """What the fits of a morph gave: one :class:`FaceMorph` per face and one :class:`EdgeMorph` per edge (in
+    the part's numbering), and the records of the refinement to a tolerance (:mod:`.refine`) and of the G1
+    correction (:mod:`.g1`), empty where those steps did not run."""
+
+    faces: list[FaceMorph]
+    edges: list[EdgeMorph]
+    refinements: tuple = ()
+    edge_refinements: tuple = ()
+    g1: tuple = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Checks:
+    """The kernel's checks of a morph: one :class:`SolidCheck` per solid of the hot part and of the cold one
+    (the cold ones marked invalid where :func:`~.checks.check_cold` found a problem), and ``gaps (n_edges,)``,
+    each edge's largest distance (mm) to the faces it bounds in the cold part."""
+
+    hot: list[SolidCheck]
+    cold: list[SolidCheck]
+    gaps: np.ndarray
+
+
+def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
+                 timings: dict[str, float] | None = None, inversion: dict | None = None) -> Report:
+    """Assemble the :class:`Report` of a morph.
+
+    ``context`` gives the (refined) part, the classification, the field and the tolerance; ``errors (N,)``
+    is each node's distance (mm) to the cold part (eq. 21, :func:`node_errors`); ``inversion`` the field
+    inversion's record as a dict (None when the field was not inverted).
+    """
+    part, cls, field = context.part, context.classification, context.field
     faces = []
-    for fm in face_morphs:
+    for fm in fits.faces:
         d = errors[cls.nodes_of(Role.FACE, fm.index)]
         nu, nv = fm.surface.shape
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
                                 fm.artificial))
     edges = []
-    for em in edge_morphs:
+    for em in fits.edges:
         d = errors[cls.nodes_of(Role.EDGE, em.index)]
         n_poles = 0 if em.curve is None else em.curve.n_poles
         edges.append(EdgeReport(em.index, list(part.edges[em.index].faces), em.nodes, n_poles, *_stats(d),
-                                float(gaps[em.index]), em.artificial))
+                                float(checks.gaps[em.index]), em.artificial))
     used = cls.used
     vertex_err = errors[cls.role == Role.VERTEX]
     names = tuple(getattr(part, "solid_names", ()))
     solids = [SolidReport(i, c.faces, c.valid, c.free_edges, h.volume, c.volume,
                           names[i] if i < len(names) else "")
-              for i, (h, c) in enumerate(zip(hot_checks, cold_checks))]
+              for i, (h, c) in enumerate(zip(checks.hot, checks.cold))]
     all_err = errors[used]
     return Report(
         hot=hot_name, field=field.source, nodes_total=len(cls.role),
@@ -266,5 +295,5 @@ def build_report(part: Part, cls: Classification, field: DisplacementField, face
         vertex_delta_max=_stats(vertex_err)[0],
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
         faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
-        tolerance=tolerance, refinements=list(refinements or []),
-        edge_refinements=list(edge_refinements or []), g1=list(g1 or []))
+        tolerance=context.settings.tolerance, refinements=[asdict(r) for r in fits.refinements],
+        edge_refinements=[asdict(r) for r in fits.edge_refinements], g1=[asdict(r) for r in fits.g1])

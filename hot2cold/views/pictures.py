@@ -51,7 +51,7 @@ def mesh_of(result, deflection: float | None = None) -> TriangleMesh:
     """The triangle mesh of the hot part that every picture is drawn on (pass it on to draw several)."""
     if deflection is None:
         deflection = 1e-3 * result.part.diagonal
-    return tessellate(result.hot.wrapped, deflection)
+    return tessellate(result.part.kernel.hot, deflection)
 
 
 def displacement_scale(result, fraction: float = DISPLACEMENT_FRACTION) -> float:
