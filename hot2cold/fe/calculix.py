@@ -22,7 +22,7 @@ steps and the field is their difference, which linearity makes exact:
    ``U_2 = K^-1 f_thermal`` (CalculiX's linear static steps solve for the step's total load);
 
 hot -> cold ``U = U_2 - U_1``.  :func:`read_hot_to_cold` reads an ``.frd`` of such a deck that way, and so
-does :func:`hot2cold.field.read_field` (the deck's heading marks its ``.frd``).  Without
+does :func:`hot2cold.io.field.read_field` (the deck's heading marks its ``.frd``).  Without
 rotation (``omega = 0``) the deck has only the thermal step and ``U`` is its displacement.
 
 Units: mm, t (tonne), s, N, MPa; temperatures in K; ``omega`` in rad/s.
@@ -346,7 +346,7 @@ def read_hot_to_cold(frd_path, points_from=None) -> DisplacementField:
     Two displacement blocks (a rotating part): ``U(last) - U(first)``; one block: that block
     (:meth:`hot2cold.fe.frd.FrdFile.hot_to_cold`; ``read_field`` does the same for an ``.frd`` whose
     heading marks it as hot2cold's).  Node positions from ``points_from`` (the :class:`TetMesh` of the run,
-    or see :func:`hot2cold.field.match_points`), else the ``.frd``'s own 6-digit ones; ``node_ids`` the
+    or see :func:`hot2cold.io.field.match_points`), else the ``.frd``'s own 6-digit ones; ``node_ids`` the
     CalculiX node numbers.
     """
     frd = FrdFile.read(frd_path)

@@ -1,4 +1,4 @@
-"""Conversion between kernel B-spline objects and the plain records of :mod:`hot2cold.bspline`.
+"""Conversion between kernel B-spline objects and the plain records of :mod:`hot2cold.core.bspline`.
 
 This is the only place that knows the kernel's 1-based arrays and its (distinct knots, multiplicities) form
 of a knot vector.  Records are always in global coordinates: a face's or edge's ``TopLoc_Location`` is

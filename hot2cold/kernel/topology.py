@@ -38,7 +38,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(eq=False)
 class KernelPart:
-    """The kernel side of a :class:`~hot2cold.model.Part` (opaque to the numeric core), as loaded: the morph
+    """The kernel side of a :class:`~hot2cold.core.model.Part` (opaque to the numeric core), as loaded: the morph
     does not change it (the cold part is a :class:`~hot2cold.kernel.rebuild.ColdKernel`).
 
     ``faces``, ``edges`` and ``vertices`` are shapes of ``work`` in the part's numbering; ``surfaces`` and
@@ -138,7 +138,7 @@ def _edge_parameters(curve_record, per_span: int) -> np.ndarray:
 
 
 def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
-    """Decompose ``shape`` (a solid or a compound of solids) into a :class:`~hot2cold.model.Part`.
+    """Decompose ``shape`` (a solid or a compound of solids) into a :class:`~hot2cold.core.model.Part`.
 
     ``samples_per_span`` sets how densely each edge's pcurve is sampled in every knot span of its curve.
     """

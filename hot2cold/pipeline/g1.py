@@ -13,7 +13,7 @@ only the *second* row of poles of each face, the row next to the edge:
 * the second-row displacements ``dp_i1`` make the cross derivative equal ``t_T`` (eq. 70):
   ``sum_i dR_i1/dv(u_q, 0) dp_i1 = dt_v(u_q)``, which for a non-rational clamped surface is eq. (75),
   ``sum_i N_i(u_q) dp_i1 = (V_{q+1} / q) dt_v(u_q)``.  Here the row of the derivative basis
-  (:func:`~hot2cold.bspline.surface_derivative_bases`) is used as it is, so the system is exact for
+  (:func:`~hot2cold.core.bspline.surface_derivative_bases`) is used as it is, so the system is exact for
   rational surfaces too (weights are kept, so the derivative is linear in the poles).  It is solved in the
   least-squares sense over about ``n_points_factor`` times as many equidistant edge points ``u_q`` as poles
   in the row, by truncated SVD (eq. 19-20).

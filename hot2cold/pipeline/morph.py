@@ -270,14 +270,14 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     Parameters
     ----------
     hot : a STEP path, a CadQuery Shape/Workplane/Assembly or a ``TopoDS_Shape``; its solids are morphed.
-    field : a field file path, a :class:`~hot2cold.field.DisplacementField`, or a pair
+    field : a field file path, a :class:`~hot2cold.io.field.DisplacementField`, or a pair
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
     settings : tolerances (default :class:`Settings()`).  With ``settings.blas_threads`` set, the BLAS
         library is held to that many threads while the morph runs, for the whole process.
     units : length unit of ``field`` when it is read or given as arrays ("mm" or "m").
     field_name : name of the displacement point field in a VTK/VTU (or other meshio) file.
     invert : the field goes cold to hot (given at the nodes of the hot mesh); it is inverted by fixed-point
-        iteration first (:mod:`hot2cold.invert`) and the iteration's residual is reported.
+        iteration first (:mod:`hot2cold.pipeline.invert`) and the iteration's residual is reported.
     progress : optional callback ``progress(stage, done, total)``.
     check : refuse a cold part that fails the checks (:func:`check_result`); False returns it as it is, for
         inspection (its report says what is wrong; :meth:`MorphResult.write_step` still refuses it).

@@ -14,7 +14,7 @@ rounds are done:
   only follow a curved field piecewise linearly, with an error that falls as the square of the span.
   Both keep the hot geometry exactly (to rounding; the operator is found by collocation at the Greville
   points of the refined knots, exact since the old spline space lies in the new one).
-* Shared edges stay shared.  A face's side row tied to an edge (:mod:`hot2cold.faces`) must keep the
+* Shared edges stay shared.  A face's side row tied to an edge (:mod:`hot2cold.pipeline.face_fit`) must keep the
   edge's degree and knots, so refinement goes by *parameter classes*: a face's u or v direction, the
   edges tied to its sides along that direction, the directions of the other faces tied to those edges,
   and so on.  Every member of a class gets the same knots (in its own parameterisation, through the
@@ -22,10 +22,11 @@ rounds are done:
   edge therefore go on sharing it pole for pole, and the cold solid stays watertight.
 * Refinement never makes a knot span finer than its nodes can determine: a span (an edge's) or patch (a
   face's) holding a bad node is halved only if each half keeps at least ``degree + 1`` (a face:
-  ``(p + 1)(q + 1)``) FE nodes, the count below which :mod:`hot2cold.edges` and :mod:`hot2cold.faces`
-  hand it to artificial nodes.  Finer spans would meet the tolerance at the nodes by bending between
-  them (more poles than data; the artificial nodes, local linear estimates of the field, would decide the
-  shape there).  A face or edge that misses where no span may be halved is reported as not refinable.
+  ``(p + 1)(q + 1)``) FE nodes, the count below which :mod:`hot2cold.pipeline.edge_fit` and
+  :mod:`hot2cold.pipeline.face_fit` hand it to artificial nodes.  Finer spans would meet the tolerance at
+  the nodes by bending between them (more poles than data; the artificial nodes, local linear estimates of
+  the field, would decide the shape there).  A face or edge that misses where no span may be halved is
+  reported as not refinable.
 """
 from __future__ import annotations
 
@@ -295,7 +296,7 @@ def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray) -> tuple[np
     """Where an edge is refined: the midpoints of the knot spans holding a bad node whose halves each keep
     at least ``degree + 1`` nodes, and whether it is raised to ``REFINED_DEGREE`` (its bad spans hold
     that many nodes).  A span with fewer nodes than that is not determined by its nodes (its artificial
-    nodes would decide it, :func:`hot2cold.edges.morph_edge`), so it is not made any finer."""
+    nodes would decide it, :func:`hot2cold.pipeline.edge_fit.morph_edge`), so it is not made any finer."""
     degree = max(curve.degree, REFINED_DEGREE)
     need = degree + 1
     breaks = _breaks(curve.knots, curve.degree)
@@ -314,7 +315,7 @@ def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray) -> lis
     """Where a face is refined, per direction (u, v): the midpoints of the knot spans of the patches holding
     a bad node, where both halves of the patch keep at least ``(p + 1)(q + 1)`` nodes (degrees after any
     elevation), and whether the direction is raised to ``REFINED_DEGREE`` (its bad patches hold that many
-    nodes).  Patches with fewer nodes are decided by artificial nodes (:mod:`hot2cold.faces`), not by the
+    nodes).  Patches with fewer nodes are decided by artificial nodes (:mod:`hot2cold.pipeline.face_fit`), not by the
     FE nodes the tolerance is about, so they are not made any finer."""
     degrees = (surface.u_degree, surface.v_degree)
     need = int(np.prod([max(d, REFINED_DEGREE) + 1 for d in degrees]))

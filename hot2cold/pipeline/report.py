@@ -212,7 +212,7 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
 
     ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.  On the cold surfaces
     ``cold_surfaces`` (one BSplineSurface per face) the face nodes' foot points are found by Newton's method
-    from their hot parameters (:mod:`hot2cold.footpoint`); the kernel is asked only where that does not
+    from their hot parameters (:mod:`hot2cold.core.footpoint`); the kernel is asked only where that does not
     settle, and for the edge nodes.
     """
     errors = np.full(len(cls.role), np.nan)
