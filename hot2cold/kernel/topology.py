@@ -20,18 +20,22 @@ import numpy as np
 from OCP.Bnd import Bnd_Box
 from OCP.BRep import BRep_Tool
 from OCP.BRepBndLib import BRepBndLib
+from OCP.BRep import BRep_Builder
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
+from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.BRepTools import BRepTools
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_SOLID, TopAbs_VERTEX
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID, TopAbs_VERTEX
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
+from OCP.gp import gp_Vec2d
 
-from ..errors import KernelError
+from ..errors import InputError, KernelError
 from ..core.model import Edge, EdgeUse, Face, Part
 from .convert import curve_to_record, surface_to_record
+from .faults import describe_face, solid_faults
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +141,130 @@ def _edge_parameters(curve_record, per_span: int) -> np.ndarray:
     return np.concatenate(pieces + [breaks[-1:]])
 
 
+def _convert(shape: TopoDS_Shape) -> TopoDS_Shape:
+    """``shape`` with every surface and curve in B-spline form (``BRepBuilderAPI_NurbsConvert``); a failure
+    names the solid and face it fails on (each face converted alone to find it), with its surface type and a
+    point on it."""
+    try:
+        return BRepBuilderAPI_NurbsConvert(shape, True).Shape()
+    except Exception as exc:  # Standard_Failure
+        failure = exc
+    faces = index_map(shape, TopAbs_FACE)
+    for s, solid in enumerate(shape_map(shape, TopAbs_SOLID)):
+        for face in shape_map(solid, TopAbs_FACE):
+            try:
+                BRepBuilderAPI_NurbsConvert(face, True)
+            except Exception as exc:  # Standard_Failure
+                raise KernelError(f"B-spline conversion of solid {s} failed at "
+                                  f"{describe_face(face, faces.FindIndex(face) - 1)}: {exc}") from exc
+    raise KernelError(f"B-spline conversion of the part failed (on no face alone): {failure}") from failure
+
+
+def _into_first_period(face, surface: Geom_BSplineSurface, name: str) -> None:
+    """Bring ``face``'s parameters into its periodic surface's first period, in place, before the surface is
+    made non-periodic (which keeps only that period).
+
+    A periodic direction whose face parameters lie a whole number of periods away (a torus face of an
+    Autodesk export runs over u 5.34 to 11.63 on a surface of 0 to 2 pi) has the face's pcurves moved by those
+    periods; one that straddles the period's end has the surface's origin set where the face begins (a knot
+    inserted there, the geometry unchanged), so that one period holds the whole face.  ``name`` names the face
+    in a message.
+    """
+    bounds = BRepTools.UVBounds_s(face)
+    shift = [0.0, 0.0]
+    for d, (periodic, lo, hi) in enumerate(((surface.IsUPeriodic(), *bounds[:2]),
+                                            (surface.IsVPeriodic(), *bounds[2:]))):
+        if not periodic:
+            continue
+        first, last = surface.Bounds()[2 * d:2 * d + 2]
+        period = last - first
+        tol = 1e-9 * period
+        if lo >= first - tol and hi <= last + tol:
+            continue
+        if hi - lo > period * (1 + 1e-7):
+            raise KernelError(f"{name} runs over {hi - lo:.6g} in {'uv'[d]}, more than its "
+                              f"surface's period {period:.6g}")
+        turns = np.floor((lo - first + tol) / period)
+        shift[d] = -turns * period
+        start = lo + shift[d]
+        if hi + shift[d] > last + tol:     # straddles the end of the period: start the period at the face
+            _set_origin(surface, d, start, tol)
+    if shift != [0.0, 0.0]:
+        _move_pcurves(face, gp_Vec2d(*shift))
+
+
+def _set_origin(surface: Geom_BSplineSurface, d: int, at: float, tol: float) -> None:
+    """Make ``at`` the first parameter of the periodic direction ``d`` of ``surface`` (same geometry)."""
+    if d == 0:
+        surface.InsertUKnot(at, 1, tol, True)
+        knots = list(surface.UKnots())
+    else:
+        surface.InsertVKnot(at, 1, tol, True)
+        knots = list(surface.VKnots())
+    index = int(np.argmin(np.abs(np.asarray(knots) - at))) + 1
+    if d == 0:
+        surface.SetUOrigin(index)
+    else:
+        surface.SetVOrigin(index)
+
+
+def _move_pcurves(face, by: gp_Vec2d) -> None:
+    """Translate the pcurves of every edge of ``face`` on it by ``by`` (both of a seam), in place."""
+    builder = BRep_Builder()
+    done = TopTools_IndexedMapOfShape()
+    explorer = TopExp_Explorer(face, TopAbs_EDGE)
+    while explorer.More():
+        edge = TopoDS.Edge_s(explorer.Current())
+        explorer.Next()
+        if done.Contains(edge):
+            continue
+        done.Add(edge)
+        tol = BRep_Tool.Tolerance_s(edge)
+        forward = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
+        first = BRep_Tool.CurveOnSurface_s(forward, face, 0.0, 0.0).Copy()
+        first.Translate(by)
+        if BRep_Tool.IsClosed_s(edge, face):
+            second = BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(edge.Oriented(TopAbs_REVERSED)), face, 0.0, 0.0).Copy()
+            second.Translate(by)
+            builder.UpdateEdge(forward, first, second, face, tol)
+        else:
+            builder.UpdateEdge(forward, first, face, tol)
+
+
+def _check_conversion(source: TopoDS_Shape, hot: TopoDS_Shape) -> None:
+    """Refuse a converted part whose solid the kernel finds invalid: :class:`InputError` naming the face when the
+    solid was invalid as given (a broken input), else :class:`KernelError` naming the face the conversion
+    broke."""
+    faces = index_map(hot, TopAbs_FACE)
+    for s, solid in enumerate(shape_map(hot, TopAbs_SOLID)):
+        if BRepCheck_Analyzer(solid).IsValid():
+            continue
+        _refuse_broken(source)
+        faults = solid_faults(solid, [(faces.FindIndex(f) - 1, f) for f in shape_map(solid, TopAbs_FACE)])
+        raise KernelError(f"B-spline conversion made solid {s} invalid: {faults[0]}"
+                          + (f" (and {len(faults) - 1} more)" if len(faults) > 1 else ""))
+
+
+def _refuse_broken(shape: TopoDS_Shape) -> None:
+    """Raise :class:`InputError` naming the first face at fault of the first solid of ``shape`` that the kernel
+    finds invalid as given; nothing when every solid is valid."""
+    message = broken_solid(shape)
+    if message:
+        raise InputError(message)
+
+
+def broken_solid(shape: TopoDS_Shape) -> str | None:
+    """"hot solid S is not valid: face F (Plane, near (x, y, z) mm): <BRepCheck statuses>" for the first solid of
+    ``shape`` that ``BRepCheck_Analyzer`` refuses, or None when every solid is valid."""
+    faces = index_map(shape, TopAbs_FACE)
+    for s, solid in enumerate(shape_map(shape, TopAbs_SOLID)):
+        broken = solid_faults(solid, [(faces.FindIndex(f) - 1, f) for f in shape_map(solid, TopAbs_FACE)])
+        if broken:
+            return (f"hot solid {s} is not valid: {broken[0]}"
+                    + (f" (and {len(broken) - 1} more)" if len(broken) > 1 else ""))
+    return None
+
+
 def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
     """Decompose ``shape`` (a solid or a compound of solids) into a :class:`~hot2cold.core.model.Part`.
 
@@ -146,18 +274,20 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
     if not solids:
         raise KernelError("the shape holds no solid")
     try:
-        converter = BRepBuilderAPI_NurbsConvert(shape, True)
-        hot = converter.Shape()
-    except Exception as exc:
-        raise KernelError(f"B-spline conversion of the part failed: {exc}") from exc
-
-    # Normalise the hot copy's geometry, then copy it: hot and work share parameterisations exactly.
-    for face in shape_map(hot, TopAbs_FACE):
-        _normalise_surface(bspline_surface(face)[0])
+        hot = _convert(shape)
+        # Normalise the hot copy's geometry, then copy it: hot and work share parameterisations exactly.
+        for k, (face, given) in enumerate(zip(shape_map(hot, TopAbs_FACE), shape_map(shape, TopAbs_FACE))):
+            surface = bspline_surface(face)[0]
+            _into_first_period(face, surface, describe_face(given, k))
+            _normalise_surface(surface)
+    except KernelError:
+        _refuse_broken(shape)     # a broken input is named as such, not as a failure of the conversion
+        raise
     for edge in shape_map(hot, TopAbs_EDGE):
         if not BRep_Tool.Degenerated_s(edge):
             first, last = BRep_Tool.Range_s(edge)
             _normalise_curve(bspline_curve(edge)[0], first, last)
+    _check_conversion(shape, hot)
     work = BRepBuilderAPI_Copy(hot, True, False).Shape()
 
     faces = shape_map(work, TopAbs_FACE)

@@ -1,6 +1,6 @@
 """Checks on the way through the morph: the hot part and the field on entry, the cold part after the sew.
 
-* :func:`check_hot`: the hot part is a closed solid (else :class:`InputError`);
+* :func:`check_hot`: the hot part is a valid closed solid (else :class:`InputError` naming the face at fault);
 * :func:`check_coverage`: the field lies on the part, in the part's units, and covers every face (else
   :class:`FieldError`, or a warning with ``Settings.extrapolate``);
 * :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself;
@@ -25,6 +25,7 @@ from ..core.domain import Trim
 from ..core.model import Classification, Part, Role
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
+from ..kernel.topology import broken_solid
 from ..settings import Settings
 
 if TYPE_CHECKING:
@@ -50,16 +51,21 @@ def check_result(result: MorphResult) -> None:
             raise MorphError(f"cold solid {s.index} has {s.faces} faces, the hot one {len(hot_faces)}")
 
 
-def check_hot(hot_checks: list[SolidCheck]) -> None:
-    """Refuse a hot part that is no closed solid (:class:`InputError`); warn about one the kernel finds
-    invalid."""
+def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
+    """Refuse a hot part the kernel finds invalid as given, naming the solid, the face, its surface type, a point
+    on it and what BRepCheck says, or one that is no closed solid (:class:`InputError`).  ``hot_checks`` holds
+    one :class:`SolidCheck` per solid of the converted part (:func:`~hot2cold.kernel.topology.decompose`
+    refuses a conversion that breaks a valid solid)."""
+    broken = broken_solid(part.kernel.source)
+    if broken:
+        raise InputError(f"{broken}; repair the part in CAD")
     for s, check in enumerate(hot_checks):
+        if not check.valid:
+            raise InputError(f"hot solid {s} is not valid after B-spline conversion (BRepCheck)")
         if check.free_edges:
             raise InputError(
                 f"hot solid {s} is not closed: {check.free_edges} of its edges bound only one face (an open shell, "
                 f"a missing or unsewn face); hot2cold morphs closed solids: sew or repair the part in CAD")
-        if not check.valid:
-            log.warning("hot solid %d is not valid (BRepCheck); the cold one may not be either", s)
 
 
 #: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user.

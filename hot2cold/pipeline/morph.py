@@ -310,7 +310,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     # load (METHOD step 1): the hot part in B-spline form, a closed solid
     part = load_part(hot, settings)
     hot_checks = check_solids(part.kernel.hot)
-    check_hot(hot_checks)
+    check_hot(part, hot_checks)
     stages.lap("load")
     stages.progress("load")
 

@@ -1,0 +1,113 @@
+"""What the kernel finds wrong with a solid, face by face, in words a message can name.
+
+:func:`solid_faults` lists the faces of a solid that ``BRepCheck_Analyzer`` refuses (with their surface
+type, a point on them and the statuses BRepCheck gives the face, its wires, edges and vertices), or the
+solid's own statuses (e.g. an unorientable shell) when no face is at fault; :func:`describe_face` names one
+face for a message.  Used on the hot part as read (a broken input) and on the part after B-spline
+conversion (a conversion that broke it).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.BRepCheck import BRepCheck_Analyzer, BRepCheck_NoError
+from OCP.BRepTools import BRepTools
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_SHELL, TopAbs_VERTEX, TopAbs_WIRE
+from OCP.TopExp import TopExp_Explorer
+
+#: Statuses named in a message at the most.
+_STATUSES = 3
+
+
+def surface_type(face) -> str:
+    """The kind of ``face``'s surface as OCCT names it without its prefix: "Plane", "Cone", "BSplineSurface"."""
+    name = BRepAdaptor_Surface(face).GetType().name
+    return name.removeprefix("GeomAbs_")
+
+
+def face_point(face) -> tuple[float, float, float]:
+    """A point ``(3,)`` of ``face``'s surface in mm: the middle of its parameter box (near the face)."""
+    try:
+        u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+        p = BRepAdaptor_Surface(face).Value((u0 + u1) / 2, (v0 + v1) / 2)
+        return (p.X(), p.Y(), p.Z())
+    except Exception:  # Standard_Failure on a face without a usable surface
+        return (float("nan"),) * 3
+
+
+def describe_face(face, index: int) -> str:
+    """E.g. "face 12 (Cone, near (1, 2, 3) mm)"."""
+    at = ", ".join(f"{x:.4g}" for x in face_point(face))
+    return f"face {index} ({surface_type(face)}, near ({at}) mm)"
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A face a solid's check refuses: ``face`` (0-based in the solid's shape numbering, or None for a fault of
+    the solid or shell as a whole), ``where`` (:func:`describe_face`, or "its shell") and the BRepCheck
+    ``statuses`` (names without the ``BRepCheck_`` prefix)."""
+
+    face: int | None
+    where: str
+    statuses: tuple[str, ...]
+
+    def __str__(self) -> str:
+        shown = ", ".join(self.statuses[:_STATUSES]) + (", ..." if len(self.statuses) > _STATUSES else "")
+        return f"{self.where}: {shown or 'invalid'}"
+
+
+def _statuses(analyzer: BRepCheck_Analyzer, shape, context) -> list[str]:
+    """The BRepCheck statuses of ``shape`` alone and within ``context`` (None: alone only), no-error left out."""
+    result = analyzer.Result(shape)
+    if result is None:
+        return []
+    found = list(result.Status())
+    if context is not None:
+        try:
+            found += list(result.StatusOnShape(context))
+        except Exception:  # no status recorded in that context
+            pass
+    return [s.name.removeprefix("BRepCheck_") for s in found if s != BRepCheck_NoError]
+
+
+def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
+    """The faults of ``solid`` (valid: none): each face of ``faces`` (pairs of the number to report and the
+    face, for the solid's faces) that ``BRepCheck_Analyzer`` refuses, or the solid's own when none is."""
+    analyzer = BRepCheck_Analyzer(solid)
+    if analyzer.IsValid():
+        return []
+    out = []
+    for k, face in faces:
+        if BRepCheck_Analyzer(face).IsValid():
+            continue
+        local = BRepCheck_Analyzer(face)
+        found = _statuses(local, face, None)
+        for kind in (TopAbs_WIRE, TopAbs_EDGE, TopAbs_VERTEX):
+            explorer = TopExp_Explorer(face, kind)
+            while explorer.More():
+                found += _statuses(local, explorer.Current(), face)
+                explorer.Next()
+        out.append(Fault(k, describe_face(face, k), tuple(dict.fromkeys(found))))
+    if out:
+        return out
+    found = _statuses(analyzer, solid, None)
+    explorer = TopExp_Explorer(solid, TopAbs_SHELL)
+    while explorer.More():
+        found += _statuses(analyzer, explorer.Current(), solid) + _statuses(analyzer, explorer.Current(), None)
+        explorer.Next()
+    # the first face whose status within a shell is not clean (e.g. badly oriented)
+    faulty = next(((k, face) for k, face in faces
+                   if _statuses(analyzer, face, None) or any(_statuses(analyzer, face, s) for s in _shells(solid))),
+                  None)
+    where = "its shell" + (f" at {describe_face(faulty[1], faulty[0])}" if faulty else "")
+    return [Fault(faulty[0] if faulty else None, where, tuple(dict.fromkeys(found)))]
+
+
+def _shells(solid) -> list:
+    explorer, out = TopExp_Explorer(solid, TopAbs_SHELL), []
+    while explorer.More():
+        out.append(explorer.Current())
+        explorer.Next()
+    return out
+
