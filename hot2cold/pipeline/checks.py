@@ -56,16 +56,17 @@ def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
     on it and what BRepCheck says, or one that is no closed solid (:class:`InputError`).  ``hot_checks`` holds
     one :class:`SolidCheck` per solid of the converted part (:func:`~hot2cold.kernel.topology.decompose`
     refuses a conversion that breaks a valid solid)."""
+    for s, check in enumerate(hot_checks):
+        if check.free_edges:
+            raise InputError(
+                f"hot solid {s} is not closed: {check.free_edges} of its edges bound only one face (an open shell, "
+                f"a missing or unsewn face); hot2cold morphs closed solids: sew or repair the part in CAD")
     broken = broken_solid(part.kernel.source)
     if broken:
         raise InputError(f"{broken}; repair the part in CAD")
     for s, check in enumerate(hot_checks):
         if not check.valid:
             raise InputError(f"hot solid {s} is not valid after B-spline conversion (BRepCheck)")
-        if check.free_edges:
-            raise InputError(
-                f"hot solid {s} is not closed: {check.free_edges} of its edges bound only one face (an open shell, "
-                f"a missing or unsewn face); hot2cold morphs closed solids: sew or repair the part in CAD")
 
 
 #: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user.
