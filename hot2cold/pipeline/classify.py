@@ -108,7 +108,8 @@ def _dense(uv: np.ndarray, spacing: float, face) -> np.ndarray:
     return np.concatenate([uv[seg] + t[:, None] * (uv[seg + 1] - uv[seg]), uv[-1:]])
 
 
-def _length(curve) -> float:
+def curve_length(curve) -> float:
+    """Length (mm) of ``curve``, as a polyline of 33 points."""
     p = evaluate_curve(curve, np.linspace(*curve.domain, 33))
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
@@ -221,7 +222,7 @@ def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, 
     samples, sample_edge, h = [], [], part.diagonal / 400.0
     for e in edge_ids:
         curve = part.edges[e].curve
-        s = np.linspace(*curve.domain, max(2, int(np.ceil(_length(curve) / h)) + 1))
+        s = np.linspace(*curve.domain, max(2, int(np.ceil(curve_length(curve) / h)) + 1))
         samples.append(evaluate_curve(curve, s))
         sample_edge.append(np.full(len(s), e))
     samples, sample_edge = np.concatenate(samples), np.concatenate(sample_edge)
