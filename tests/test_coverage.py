@@ -84,3 +84,28 @@ def test_a_truly_bare_face_is_still_refused_and_named(tmp_path, capsys):
     err = capsys.readouterr().err
     assert re.match(r"hot2cold: error: .*bottom\.csv covers only part of the solid: 1 of its 10 faces gets no FE "
                     r"node within .* mm where .*: face \d+ near \(0, 0, -5\) mm", err), err
+
+
+def test_touching_solids_share_the_nodes_of_their_coincident_faces(tmp_path, capsys):
+    """Two boxes side by side (a compound, as an assembly's STEP holds them): the nodes of the face they
+    share lie on a face of each; both solids get them, morph and are valid."""
+    import cadquery as cq
+    left = cq.Workplane().box(10, 10, 10).val()
+    right = cq.Workplane().box(10, 10, 10).translate((10, 0, 0)).val()
+    compound = cq.Compound.makeCompound([left, right])
+    nodes = fe_surface_nodes(left.wrapped, 1.0, seed=1)[0]
+    nodes = np.concatenate([nodes, fe_surface_nodes(right.wrapped, 1.0, seed=2)[0]])
+    nodes = np.unique(nodes[np.lexsort(nodes.T)].round(12), axis=0)
+    step = tmp_path / "two.step"
+    compound.exportStep(str(step))
+    field = _write(tmp_path / "two.csv", nodes)
+    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step"), "-q"]) == 0, \
+        capsys.readouterr().err
+    result = morph(compound, (nodes, FIELD(nodes)))
+    assert len(result.report.solids) == 2 and all(s.valid and s.closed for s in result.report.solids)
+    cls = result.classification
+    assert len(cls.node) > len(nodes) and result.report.nodes_total == len(nodes)
+    shared = cls.node[len(nodes):]
+    assert np.all(np.abs(nodes[shared, 0] - 5.0) < 1e-9)      # the entries added are on the shared plane
+    np.testing.assert_array_equal(result.field.points, nodes[cls.node])
+    _assert_affine(result)
