@@ -109,3 +109,23 @@ def test_touching_solids_share_the_nodes_of_their_coincident_faces(tmp_path, cap
     assert np.all(np.abs(nodes[shared, 0] - 5.0) < 1e-9)      # the entries added are on the shared plane
     np.testing.assert_array_equal(result.field.points, nodes[cls.node])
     _assert_affine(result)
+
+
+def test_a_free_face_beside_the_solid_without_nodes_is_named_in_a_warning(tmp_path, capsys):
+    """A solid with a loose construction face beside it (as a CATIA STEP may hold) and nodes on the solid
+    only: morphed (exit 0), the bare free face named in one warning, not counted among the solid's faces."""
+    import cadquery as cq
+    box = cq.Workplane().box(10, 10, 10).val()
+    loose = cq.Face.makePlane(4, 4, basePnt=(20, 0, 0))
+    compound = cq.Compound.makeCompound([box, loose])
+    nodes = fe_surface_nodes(box.wrapped, 1.0, seed=1)[0]
+    step = tmp_path / "loose.step"
+    compound.exportStep(str(step))
+    field = _write(tmp_path / "loose.csv", nodes)
+    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step")]) == 0
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
+    assert len(warnings) == 1 and "Traceback" not in err, err
+    assert re.match(r"WARNING hot2cold\.pipeline\.checks: 1 free face\(s\) beside the solid\(s\), in no solid, get "
+                    r"no FE node: face \d+ near \(20, 0, 0\) mm; they are morphed from the field of the faces "
+                    r"nearby \(artificial nodes\)$", warnings[0]), warnings[0]
