@@ -30,6 +30,14 @@ def _write(path, points):
     return path
 
 
+def _cli(shape, nodes, tmp_path, name, *more) -> int:
+    """Exit code of ``hot2cold morph`` on ``shape`` written as STEP and the affine field at ``nodes``."""
+    step = tmp_path / f"{name}.step"
+    shape.exportStep(str(step))
+    field = _write(tmp_path / f"{name}.csv", nodes)
+    return main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step"), *more])
+
+
 def _chamfered_box():
     import cadquery as cq
     return cq.Workplane().box(60, 60, 10).edges(">Z").chamfer(0.3).val()
@@ -52,11 +60,7 @@ def test_narrow_faces_with_nodes_on_their_edges_only_morph_exactly(make, tmp_pat
     """The nodes 1.5 mm apart: the narrow face's area times the node density is 11 to 13 nodes, none inside."""
     shape = make()
     nodes = fe_surface_nodes(shape.wrapped, 1.5, seed=1)[0]
-    step = tmp_path / "hot.step"
-    shape.exportStep(str(step))
-    field = _write(tmp_path / "field.csv", nodes)
-    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step"), "-q"]) == 0, \
-        capsys.readouterr().err
+    assert _cli(shape, nodes, tmp_path, "hot", "-q") == 0, capsys.readouterr().err
     result = morph(shape, (nodes, FIELD(nodes)))
     narrow = [k for k in range(len(result.part.faces)) if not np.any(
         (result.classification.role == Role.FACE) & (result.classification.owner == k))]
@@ -77,10 +81,7 @@ def test_a_truly_bare_face_is_still_refused_and_named(tmp_path, capsys):
     shape = _chamfered_box()
     nodes = fe_surface_nodes(shape.wrapped, 1.5, seed=1)[0]
     nodes = nodes[nodes[:, 2] > -4.99]               # the bottom face and its edges lose their nodes
-    step = tmp_path / "hot.step"
-    shape.exportStep(str(step))
-    field = _write(tmp_path / "bottom.csv", nodes)
-    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step"), "-q"]) == 2
+    assert _cli(shape, nodes, tmp_path, "bottom", "-q") == 2
     err = capsys.readouterr().err
     assert re.match(r"hot2cold: error: .*bottom\.csv covers only part of the solid: 1 of its 10 faces gets no FE "
                     r"node within .* mm where .*: face \d+ near \(0, 0, -5\) mm", err), err
@@ -96,11 +97,7 @@ def test_touching_solids_share_the_nodes_of_their_coincident_faces(tmp_path, cap
     nodes = fe_surface_nodes(left.wrapped, 1.0, seed=1)[0]
     nodes = np.concatenate([nodes, fe_surface_nodes(right.wrapped, 1.0, seed=2)[0]])
     nodes = np.unique(nodes[np.lexsort(nodes.T)].round(12), axis=0)
-    step = tmp_path / "two.step"
-    compound.exportStep(str(step))
-    field = _write(tmp_path / "two.csv", nodes)
-    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step"), "-q"]) == 0, \
-        capsys.readouterr().err
+    assert _cli(compound, nodes, tmp_path, "two", "-q") == 0, capsys.readouterr().err
     result = morph(compound, (nodes, FIELD(nodes)))
     assert len(result.report.solids) == 2 and all(s.valid and s.closed for s in result.report.solids)
     cls = result.classification
@@ -119,10 +116,7 @@ def test_a_free_face_beside_the_solid_without_nodes_is_named_in_a_warning(tmp_pa
     loose = cq.Face.makePlane(4, 4, basePnt=(20, 0, 0))
     compound = cq.Compound.makeCompound([box, loose])
     nodes = fe_surface_nodes(box.wrapped, 1.0, seed=1)[0]
-    step = tmp_path / "loose.step"
-    compound.exportStep(str(step))
-    field = _write(tmp_path / "loose.csv", nodes)
-    assert main(["morph", str(step), str(field), "-o", str(tmp_path / "cold.step")]) == 0
+    assert _cli(compound, nodes, tmp_path, "loose") == 0
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if line.startswith("WARNING")]
     assert len(warnings) == 1 and "Traceback" not in err, err
