@@ -196,6 +196,10 @@ class Classification:
     foot : (N, 3) float, the foot point S(u, v), C(t) or the vertex (NaN when ignored).
     distance : (N,) float, distance from node to its foot point (inf when ignored).
     node_distance, edge_distance : the lengths (mm) used.
+    node : (N,) int, the field row of each entry: ``arange`` for a field whose every node feeds one solid.
+        A node on coincident faces of touching solids (or on a free face beside a solid) feeds each of them:
+        it has one entry per solid, the first at its own row, the others after the field's rows, all with
+        its field row here; :meth:`hot2cold.io.field.DisplacementField.take` gives the field of the entries.
     """
 
     role: np.ndarray
@@ -206,6 +210,16 @@ class Classification:
     distance: np.ndarray
     node_distance: float
     edge_distance: float
+    node: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.node is None:
+            object.__setattr__(self, "node", np.arange(len(self.role)))
+
+    @property
+    def field_nodes(self) -> int:
+        """How many nodes the field has (the entries of nodes that feed two solids counted once)."""
+        return len(self.node) - int(np.count_nonzero(self.node != np.arange(len(self.node))))
 
     def nodes_of(self, role: Role, index: int) -> np.ndarray:
         """Indices of the nodes of ``role`` owned by face, edge or vertex ``index``."""

@@ -173,6 +173,11 @@ class DisplacementField:
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
+    def take(self, rows: np.ndarray) -> DisplacementField:
+        """The field of the nodes ``rows (M,)`` (int, may repeat a node), ids and source kept."""
+        ids = None if self.node_ids is None else self.node_ids[rows]
+        return DisplacementField(self.points[rows], self.displacements[rows], ids, self.source)
+
     def __repr__(self) -> str:
         dmax = float(np.sqrt((self.displacements ** 2).sum(axis=1)).max())
         ids = "" if self.node_ids is None else ", with node ids"

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..core.bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
 from ..errors import FieldError, InputError, MorphError
+from .classify import curve_length
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
@@ -87,15 +88,57 @@ _EXPECTED_NODES = 10
 _LARGE_SHARE = 0.1
 
 
+def face_coverage(part: Part, cls: Classification) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the FE nodes of ``cls`` put on each of the part's F faces: the nodes inside it (role FACE), the
+    nodes on its boundary (role EDGE on its edges, VERTEX on its vertices), each ``(F,)`` int, and whether
+    its boundary is covered ``(F,)`` bool: every edge of it (degenerate ones aside) carries a node, on the
+    edge or at both its vertices.
+
+    A node on a face's edge is a node of that face: the edge fit (eq. 33-37) takes it, and the face's
+    boundary rows come from the morphed edges.
+    """
+    n_faces = len(part.faces)
+    inner = np.bincount(cls.owner[cls.role == Role.FACE], minlength=n_faces)
+    on_edge = np.bincount(cls.owner[cls.role == Role.EDGE], minlength=len(part.edges))
+    on_vertex = np.bincount(cls.owner[cls.role == Role.VERTEX], minlength=len(part.vertices))
+    boundary = np.zeros(n_faces, int)
+    covered = np.ones(n_faces, bool)
+    for edge in part.edges:
+        faces = list(edge.faces)
+        ends = set(edge.vertices) - {-1}
+        boundary[faces] += on_edge[edge.index]
+        if not edge.degenerate and not (on_edge[edge.index] or (ends and all(on_vertex[v] for v in ends))):
+            covered[faces] = False
+    for face in part.faces:
+        vertices = {part.edges[use.edge].vertices[i] for use in face.uses for i in (0, 1)} - {-1}
+        boundary[face.index] += int(sum(on_vertex[v] for v in vertices))
+    return inner, boundary, covered
+
+
+def _node_spacing(points: np.ndarray) -> float:
+    """Median distance (mm) from each of ``points (n, 3)`` to its nearest neighbour: the field's node
+    spacing (inf for fewer than two points)."""
+    if len(points) < 2:
+        return float("inf")
+    d, _ = cKDTree(points).query(points, k=2)
+    return float(np.median(d[:, 1]))
+
+
 def check_coverage(part: Part, cls: Classification, field: DisplacementField, settings: Settings) -> None:
     """Raise :class:`FieldError` when the field and the part clearly disagree: no node on the part, most
-    nodes off the part with a field whose extent differs from the part's by a unit factor, or faces that get
-    no FE node (unless ``settings.extrapolate``: then a warning).
+    nodes off the part with a field whose extent differs from the part's by a unit factor, or faces of a
+    solid that the field leaves bare (unless ``settings.extrapolate``: then a warning).
 
-    A face without nodes counts as not covered where the density of the nodes used on the other faces (per
-    mm^2) would put ``_EXPECTED_NODES`` or more on it, or where it holds ``_LARGE_SHARE`` or more of the part's
-    surface; a face smaller than that, or a sparse field, leaves faces without nodes that the artificial
-    nodes take care of (logged).
+    A face is covered when an FE node lies inside it or when every edge of its boundary carries one
+    (:func:`face_coverage`: narrow faces an FE element spans, the planes of a tessellation).  A face that is
+    not counts as bare where the density of the nodes used (per mm^2) would put ``_EXPECTED_NODES`` or more
+    inside it (in the part of it farther than the node spacing h from its boundary: a face of area A and
+    perimeter P, width w = 2A/P, expects ``density * A * (1 - h / w)``, none when w <= h), or where it holds
+    ``_LARGE_SHARE`` or more of the part's surface; a face smaller than that, or a sparse field, leaves faces
+    without nodes that the artificial nodes take care of (logged).
+
+    Free faces (in no solid: construction surfaces beside a solid) are not faces of a solid: they are
+    morphed with the nodes on them, and those without any are named in a warning, not refused.
     """
     extent = float(np.linalg.norm(np.ptp(field.points, axis=0))) if len(field) > 1 else 0.0
     ratio = extent / part.diagonal
@@ -113,18 +156,30 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
             f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
             f"this part, or raise --node-distance")
-    on_face = cls.role == Role.FACE
-    counts = np.bincount(cls.owner[on_face], minlength=len(part.faces))
-    if counts.all():
+    inner, boundary, edges_covered = face_coverage(part, cls)
+    free = np.array([face.solid < 0 for face in part.faces], bool)
+    bare_free = np.flatnonzero(free & (inner + boundary == 0))
+    if len(bare_free):
+        log.warning("%d free face(s) beside the solid(s), in no solid, get no FE node: %s; they are morphed "
+                    "from the field of the faces nearby (artificial nodes)", len(bare_free),
+                    _listed([_face_at(part, k) for k in bare_free]))
+    covered = (inner > 0) | edges_covered | free
+    if covered.all():
         return
     areas = face_areas(part.kernel.faces)
-    expected = np.count_nonzero(cls.used) / max(float(areas[counts > 0].sum()), 1e-300) * areas
-    large = areas >= _LARGE_SHARE * float(areas.sum())
-    sparse = np.flatnonzero((counts == 0) & (expected < _EXPECTED_NODES) & ~large)
+    in_solid = ~free
+    density = np.count_nonzero(cls.used) / max(float(areas[in_solid & (inner + boundary > 0)].sum()), 1e-300)
+    spacing = _node_spacing(cls.foot[cls.used])
+    perimeter = np.array([sum(curve_length(part.edges[use.edge].curve) for use in face.uses
+                              if not part.edges[use.edge].degenerate) for face in part.faces])
+    width = 2.0 * areas / np.maximum(perimeter, 1e-300)
+    expected = density * areas * np.clip(1.0 - spacing / np.maximum(width, 1e-300), 0.0, 1.0)
+    large = areas >= _LARGE_SHARE * float(areas[in_solid].sum())
+    sparse = np.flatnonzero(~covered & (expected < _EXPECTED_NODES) & ~large)
     if len(sparse):
         log.info("face(s) %s get no FE node (%s expected from the node density): their nodes are artificial",
                  ", ".join(map(str, sparse)), ", ".join(f"{x:.2g}" for x in expected[sparse]))
-    empty = np.flatnonzero((counts == 0) & ((expected >= _EXPECTED_NODES) | large))
+    empty = np.flatnonzero(~covered & ((expected >= _EXPECTED_NODES) | large))
     if not len(empty):
         return
     # a solid of several without a node is named as a whole, other faces one by one with a point on them
@@ -132,24 +187,31 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             if len(part.solids) > 1 and len(faces) > 1 and set(faces) <= set(empty.tolist())]
     names = [f"solid {s} (faces {min(part.solids[s])}-{max(part.solids[s])}, "
              f"{expected[list(part.solids[s])].sum():.0f})" for s in bare]
-    for k in empty:
-        face = part.faces[k]
-        if face.solid not in bare:
-            u0, u1, v0, v1 = face.uv_box
-            at = evaluate_surface(face.surface, [(u0 + u1) / 2], [(v0 + v1) / 2])[0]
-            names.append(f"face {k} near ({', '.join(f'{x:.4g}' for x in at)}) mm ({expected[k]:.0f})")
-    listed = ", ".join(names[:_NAMED]) + (f" and {len(names) - _NAMED} more" if len(names) > _NAMED else "")
+    names += [f"{_face_at(part, k)} ({expected[k]:.0f})" for k in empty if part.faces[k].solid not in bare]
     large_too = ("" if np.all(expected[empty] >= _EXPECTED_NODES) else
                  f", or on a face that holds {100 * _LARGE_SHARE:.0f} % or more of the part's surface")
-    what = (f"{len(empty)} of its {len(part.faces)} faces get{'s' if len(empty) == 1 else ''} no FE node within "
-            f"{cls.node_distance:.3g} mm where the node density of the other faces would put {_EXPECTED_NODES} or "
-            f"more{large_too}: {listed}")
+    n_solid = int(np.count_nonzero(in_solid))
+    what = (f"{len(empty)} of its {n_solid} faces get{'s' if len(empty) == 1 else ''} no FE node within "
+            f"{cls.node_distance:.3g} mm where the node density of the other faces "
+            f"would put {_EXPECTED_NODES} or more{large_too}: {_listed(names)}")
     if settings.extrapolate:
         log.warning("%s covers only part of the solid: %s; they are morphed from the field of the other faces, "
                     "extrapolated (--extrapolate)", source, what)
         return
     raise FieldError(f"{source} covers only part of the solid: {what}; give a field over the whole part, or "
                      f"--extrapolate (Settings.extrapolate) to morph such faces from the field of the others")
+
+
+def _face_at(part: Part, k: int) -> str:
+    """``face k near (x, y, z) mm``: a point of face ``k`` at the middle of its parameter box."""
+    u0, u1, v0, v1 = part.faces[k].uv_box
+    at = evaluate_surface(part.faces[k].surface, [(u0 + u1) / 2], [(v0 + v1) / 2])[0]
+    return f"face {k} near ({', '.join(f'{x:.4g}' for x in at)}) mm"
+
+
+def _listed(names: list[str]) -> str:
+    """The first ``_NAMED`` of ``names``, comma-separated, and how many more."""
+    return ", ".join(names[:_NAMED]) + (f" and {len(names) - _NAMED} more" if len(names) > _NAMED else "")
 
 
 #: Sample spacing of the checks of the cold part, times the part's diagonal, and samples per face direction

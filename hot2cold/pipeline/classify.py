@@ -108,7 +108,8 @@ def _dense(uv: np.ndarray, spacing: float, face) -> np.ndarray:
     return np.concatenate([uv[seg] + t[:, None] * (uv[seg + 1] - uv[seg]), uv[-1:]])
 
 
-def _length(curve) -> float:
+def curve_length(curve) -> float:
+    """Length (mm) of ``curve``, as a polyline of 33 points."""
     p = evaluate_curve(curve, np.linspace(*curve.domain, 33))
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
@@ -142,9 +143,55 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
 
 def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
                    projector: Projector) -> Classification:
-    """Classify the nodes of ``field`` on ``part`` (see the module docstring)."""
+    """Classify the nodes of ``field`` on ``part`` (see the module docstring).
+
+    Each solid (and the free faces beside them, as one more group) classifies the nodes on its own: a node
+    on two coincident faces of touching solids feeds both.  Row i < N of the result is field node i, in the
+    group where it lies nearest; a node that feeds further solids gets one more row each, after the N
+    (``Classification.node`` names its field row; :meth:`DisplacementField.take` gives the field of the rows).
+    """
     node_distance, edge_distance = settings.lengths(part.diagonal)
     points = field.points
+    n = len(points)
+    spacing = part.diagonal / 150.0
+    cloud, cloud_face = _face_cloud(part, projector, spacing)
+    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * spacing)
+    group_of_face = np.array([face.solid for face in part.faces], int)
+    groups = np.unique(group_of_face)
+    records = []
+    for g in groups:
+        keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
+        records.append(_classify_group(part, points, pair_node[keep], pair_face[keep], node_distance,
+                                       edge_distance, spacing, projector))
+    if len(records) == 1:
+        role, owner, uv, t, foot, distance = records[0]
+        node = np.arange(n)
+    else:
+        dist = np.stack([r[5] for r in records])                  # (G, N), inf where a group leaves the node
+        first = np.argmin(dist, axis=0)
+        rows = [np.arange(n)]
+        picks = [(first, np.arange(n))]
+        for g in range(len(records)):
+            also = np.flatnonzero(np.isfinite(dist[g]) & (first != g))
+            rows.append(also)
+            picks.append((np.full(len(also), g), also))
+        node = np.concatenate(rows)
+        role, owner, uv, t, foot, distance = (
+            np.concatenate([np.stack([r[a] for r in records])[w, i] for w, i in picks]) for a in range(6))
+        if len(node) > n:
+            log.info("%d nodes lie on faces of two or more solids (or free faces): each feeds them all",
+                     len(np.unique(node[n:])))
+    counts = {name: int(np.sum(role == r)) for name, r in
+              (("face", Role.FACE), ("edge", Role.EDGE), ("vertex", Role.VERTEX), ("ignored", Role.IGNORED))}
+    log.info("classified %d nodes: %s", n, counts)
+    return Classification(role, owner, uv, t, foot, distance, node_distance, edge_distance, node=node)
+
+
+def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
+                    node_distance: float, edge_distance: float, spacing: float, projector: Projector):
+    """Classify ``points (N, 3)`` on the faces of the candidate pairs ``(pair_node, pair_face)`` (each
+    ``(c,)``, sorted by face): the arrays role, owner ``(N,)``, uv ``(N, 2)``, t ``(N,)``, foot ``(N, 3)``,
+    distance ``(N,)`` of :class:`Classification`."""
     n = len(points)
     role = np.full(n, Role.IGNORED)
     owner = np.full(n, -1)
@@ -152,10 +199,6 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     t = np.full(n, np.nan)
     foot = np.full((n, 3), np.nan)
     distance = np.full(n, np.inf)
-
-    spacing = part.diagonal / 150.0
-    cloud, cloud_face = _face_cloud(part, projector, spacing)
-    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * spacing)
     best = np.full(n, np.inf)
 
     def offer(k: int, nodes: np.ndarray, f_uv: np.ndarray, f_dist: np.ndarray) -> None:
@@ -195,10 +238,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
         distance[idx] = best[idx]
 
     _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector)
-    counts = {name: int(np.sum(role == r)) for name, r in
-              (("face", Role.FACE), ("edge", Role.EDGE), ("vertex", Role.VERTEX), ("ignored", Role.IGNORED))}
-    log.info("classified %d nodes: %s", n, counts)
-    return Classification(role, owner, uv, t, foot, distance, node_distance, edge_distance)
+    return role, owner, uv, t, foot, distance
 
 
 def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector):
@@ -221,7 +261,7 @@ def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, 
     samples, sample_edge, h = [], [], part.diagonal / 400.0
     for e in edge_ids:
         curve = part.edges[e].curve
-        s = np.linspace(*curve.domain, max(2, int(np.ceil(_length(curve) / h)) + 1))
+        s = np.linspace(*curve.domain, max(2, int(np.ceil(curve_length(curve) / h)) + 1))
         samples.append(evaluate_curve(curve, s))
         sample_edge.append(np.full(len(s), e))
     samples, sample_edge = np.concatenate(samples), np.concatenate(sample_edge)

@@ -68,8 +68,9 @@ class MorphResult:
     part, classification, faces, edges : the intermediate records, for inspection (``part`` is the hot part,
         refined where a tolerance asked for it; its kernel side is the hot part's as loaded).
     field : DisplacementField, the field used (hot positions and hot-to-cold displacements, inverted if
-        asked).
-    node_errors : (N,) float array, each node's distance (mm) to the cold part (eq. 21); NaN where ignored.
+        asked), one row per entry of ``classification``: a node on coincident faces of two solids is in it
+        once per solid it feeds (``classification.node`` gives the row of the field as given).
+    node_errors : (N,) float array, each entry's distance (mm) to the cold part (eq. 21); NaN where ignored.
     cold_kernel : ColdKernel, the cold part's kernel shape with its faces, edges and vertices in the part's
         numbering (``cold`` wraps its shape).
     problems : tuple of str, what the checks after the sew found wrong with the cold part (a face folded
@@ -317,6 +318,8 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     projector = Projector(part.kernel.faces, part.kernel.edges)
     cls = classify_nodes(part, field, settings, projector)
+    if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
+        field = field.take(cls.node)
     check_coverage(part, cls, field, settings)
     stages.lap("classify")
     stages.progress("classify")

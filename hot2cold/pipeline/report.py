@@ -284,7 +284,7 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
               for i, (h, c) in enumerate(zip(checks.hot, checks.cold))]
     all_err = errors[used]
     return Report(
-        hot=hot_name, field=field.source, nodes_total=len(cls.role),
+        hot=hot_name, field=field.source, nodes_total=cls.field_nodes,
         nodes_on_faces=int(np.sum(cls.role == Role.FACE)),
         nodes_on_edges=int(np.sum(cls.role == Role.EDGE)),
         nodes_on_vertices=int(np.sum(cls.role == Role.VERTEX)),
