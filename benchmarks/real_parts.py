@@ -293,6 +293,11 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path) -> Run
 
 # -------------------------------------------------------------------------------------------- the processes
 
+def load(data: dict) -> Run:
+    """A :class:`Run` from its saved dict."""
+    return Run(**{k: v for k, v in data.items() if k in Run.__dataclass_fields__})
+
+
 def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_memory_gb: float | None) -> Run:
     """:func:`run_here` in a fresh process; a timeout, a crash or a memory limit is recorded, not raised."""
     with tempfile.TemporaryDirectory(prefix="real_parts_") as tmp:
@@ -323,7 +328,7 @@ def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_
                 time.sleep(0.2)
             child.returncode = 0        # reaped here; keep Popen from waiting again
         if out.exists():
-            run = Run(**{k: v for k, v in json.loads(out.read_text()).items() if k in Run.__dataclass_fields__})
+            run = load(json.loads(out.read_text()))
         else:
             run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
             if status == "timeout":
@@ -391,6 +396,8 @@ def main(argv=None) -> int:
     parser.add_argument("--max-memory", type=float, default=8.0, metavar="GB",
                         help="address-space limit of each run (default 8 GB; 0: none)")
     parser.add_argument("--json", type=Path, help="save the runs here")
+    parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
+                        help="print the scoreboard of runs saved with --json (several files: joined), run nothing")
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)          # child: one run
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -403,6 +410,10 @@ def main(argv=None) -> int:
         if n not in NODES:
             parser.error(f"unknown node set {n!r}: one of {NODES}")
 
+    if args.show:
+        runs = [load(r) for path in args.show for r in json.loads(path.read_text())]
+        print(scoreboard(runs))
+        return 0
     if args.one is not None:
         run = run_here(args.one, kinds[0], fields[0], args.workdir)
         args.json.write_text(json.dumps(asdict(run)))

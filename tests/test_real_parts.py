@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -115,6 +116,7 @@ def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
                      free_edges=0, faces_cold=2, exact_max=1e-12)
     smooth = bench.Run(part="a", path="a", nodes_kind="fe", field="smooth", faces=2, exit_code=0, valid=True,
                        free_edges=0, faces_cold=2, exact_max=1e-3)
+    assert bench.load(asdict(died)) == died                         # --json, then --show
     board = bench.scoreboard([good, smooth, died, hung])
     assert sum(line.startswith("| ") for line in board.splitlines()) == 5       # the head and 4 rows
     assert board.endswith("2 of 4 morph (exit 0, valid on read-back, faces kept, 0 free edges); "
