@@ -1,0 +1,441 @@
+"""Real parts from other CAD systems: every corpus part morphed as a user would, scored against the exact
+cold geometry.
+
+Run from the repository::
+
+    python benchmarks/real_parts.py                              # everything (corpus + sample_parts)
+    python benchmarks/real_parts.py --parts boat,handle --fields affine --nodes fe --timeout 120
+    python benchmarks/real_parts.py --json out/real_parts.json
+
+Parts: ``corpus/real_parts/*`` (see ``corpus/README.md``) and the bundled ``sample_parts/*.step``.  For each
+(part, node set, field), in a fresh process (so a crash, a hang or a memory blow-up of one run stops none of
+the others, and its peak memory is its own):
+
+* node set ``fe``: :func:`hot2cold.kernel.sampling.fe_surface_nodes` at a spacing of diagonal / 80, bounded
+  so the part gets roughly 5 000 to 40 000 nodes; ``tess``: the vertices of the kernel's triangulation
+  (:func:`hot2cold.kernel.tessellate.tessellate`), as an STL or CFD surface mesh gives them (no node inside
+  a plane);
+* field ``affine``: :meth:`hot2cold.testing.synthetic.AffineField.thermal` about the part's centre (scale
+  1 + 2e-4, 0.05 degrees about a skew axis, a translation of 1e-4 x diagonal); ``smooth``:
+  :class:`hot2cold.testing.synthetic.UntwistField` about the part's longest side, displacements about
+  1e-3 x diagonal; written with the nodes as an ``.npz``;
+* the morph: ``hot2cold.cli.main(["morph", hot, field.npz, "-o", cold, "--report", json, "-q"])``, its exit
+  code and one-line message; time and the process's peak resident memory (``ru_maxrss``) after it;
+* on exit 0: the cold STEP read back (:func:`hot2cold.kernel.step.read_step`), BRepCheck, free edges and faces
+  of its solids (:func:`hot2cold.kernel.validity.check_solids`) against the hot part's; and the error against
+  the exact cold geometry: dense samples inside every hot face (:func:`hot2cold.kernel.sampling.face_samples`,
+  half the node spacing), mapped by the analytic field, each one's distance to the cold face with the same
+  index (:class:`hot2cold.kernel.project.Projector`); the largest over all faces and the face where it is.
+
+A run past ``--timeout`` is killed and recorded as such; a child that dies (signal, memory limit
+``--max-memory``) is recorded with what it wrote to stderr.  Everything is seeded: the same options give the
+same node sets and fields.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import re
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT / "corpus" / "real_parts"
+SAMPLES = ROOT / "sample_parts"
+FIELDS = ("affine", "smooth")
+NODES = ("fe", "tess")
+#: Node spacing is the diagonal over this, bounded by the node counts below.
+PER_DIAGONAL = 80
+NODE_RANGE = (5_000, 40_000)
+#: The affine field must be reproduced to this (mm) on every face.
+AFFINE_TOLERANCE = 1e-8
+SEED = 0
+
+
+@dataclass
+class Run:
+    """One (part, node set, field) run: what the morph said and what the cold part is."""
+
+    part: str
+    path: str
+    nodes_kind: str
+    field: str
+    cad: str = ""
+    faces: int | None = None            # faces of the hot part's solids
+    nodes: int | None = None
+    spacing: float | None = None
+    exit_code: int | None = None        # None: the child died before the morph returned
+    message: str = ""
+    seconds: float | None = None        # the morph (cli.main) alone
+    peak_mb: float | None = None        # the child's peak resident memory
+    valid: bool | None = None           # every solid of the cold STEP, read back, passes BRepCheck
+    free_edges: int | None = None
+    faces_cold: int | None = None
+    exact_max: float | None = None      # mm, over dense samples inside every face
+    exact_face: int | None = None       # the face of exact_max
+    samples: int | None = None
+    delta_max: float | None = None      # mm, the report's, at the nodes
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """Exit 0, valid on read-back, faces kept, 0 free edges."""
+        return (self.exit_code == 0 and bool(self.valid) and self.free_edges == 0
+                and self.faces_cold == self.faces)
+
+    @property
+    def exact(self) -> bool:
+        """:attr:`ok` and within :data:`AFFINE_TOLERANCE` of the exact cold geometry on every face."""
+        return self.ok and self.exact_max is not None and self.exact_max <= AFFINE_TOLERANCE
+
+
+# ------------------------------------------------------------------------------------------------- the parts
+
+def parts(root: Path = ROOT) -> list[Path]:
+    """The corpus files and the bundled sample parts, sorted by name within each."""
+    corpus = sorted(p for p in (root / "corpus" / "real_parts").iterdir()
+                    if p.suffix.lower() in (".step", ".stp"))
+    return corpus + sorted((root / "sample_parts").glob("*.step"))
+
+
+def cad_system(path: Path) -> str:
+    """The STEP header's FILE_NAME ``originating_system`` (else ``preprocessor_version``), shortened."""
+    with open(path, "rb") as fh:
+        head = fh.read(8192).decode("latin-1")
+    match = re.search(r"FILE_NAME\s*\((.*?)\)\s*;", head, re.S)
+    if not match:
+        return "?"
+    strings = [s.strip() for s in re.findall(r"'((?:[^']|'')*)'", match.group(1))]
+    # name, time stamp, author(s), organisation(s), preprocessor_version, originating_system, authorization
+    for s in (strings[-2], strings[-3]) if len(strings) >= 3 else ():
+        if s and s.lower() not in ("unknown", "none"):
+            return re.sub(r"\s+", " ", s)[:28]
+    return "blank"
+
+
+def solid_faces(shape) -> list:
+    """The faces of the solids of ``shape`` (loose shells beside them left out), solid after solid, each in
+    the project's numbering (:func:`hot2cold.kernel.sampling.face_list`)."""
+    from OCP.TopAbs import TopAbs_SOLID
+
+    from hot2cold.kernel.sampling import face_list
+    from hot2cold.kernel.topology import shape_map
+
+    return [f for solid in shape_map(shape, TopAbs_SOLID) for f in face_list(solid)]
+
+
+def box(shape) -> tuple[np.ndarray, np.ndarray]:
+    """Corners ``(3,)``, ``(3,)`` of the bounding box of ``shape`` in mm."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    b = Bnd_Box()
+    BRepBndLib.Add_s(shape, b, False)
+    x0, y0, z0, x1, y1, z1 = b.Get()
+    return np.array([x0, y0, z0]), np.array([x1, y1, z1])
+
+
+def node_spacing(diagonal: float, area: float) -> float:
+    """diagonal / :data:`PER_DIAGONAL`, bounded so that ``area`` (mm^2) gets about :data:`NODE_RANGE` nodes."""
+    lo, hi = np.sqrt(area / NODE_RANGE[1]), np.sqrt(area / NODE_RANGE[0])
+    return float(np.clip(diagonal / PER_DIAGONAL, lo, hi))
+
+
+def node_set(shape, kind: str, spacing: float) -> np.ndarray:
+    """Node positions ``(N, 3)`` of kind ``fe`` (FE-like surface nodes) or ``tess`` (triangulation vertices,
+    merged where faces share them; the deflection is raised until at most :data:`NODE_RANGE` [1] remain)."""
+    if kind == "fe":
+        from hot2cold.kernel.sampling import fe_surface_nodes
+
+        return fe_surface_nodes(shape, spacing, seed=SEED)[0]
+    if kind == "tess":
+        from hot2cold.kernel.tessellate import tessellate
+        from hot2cold.kernel.topology import diagonal
+
+        def vertices(deflection):
+            return np.unique(np.round(tessellate(shape, deflection).vertices, 9), axis=0)
+
+        deflection = 1e-3 * diagonal(shape)
+        v = vertices(deflection)
+        for _ in range(6):                  # coarser while too many
+            if len(v) <= NODE_RANGE[1]:
+                break
+            deflection *= 3.0
+            v = vertices(deflection)
+        for _ in range(2):                  # finer while too few, as long as not too many
+            if len(v) >= NODE_RANGE[0]:
+                break
+            finer = vertices(deflection / 3.0)
+            if len(finer) > NODE_RANGE[1]:
+                break
+            deflection, v = deflection / 3.0, finer
+        return v
+    raise ValueError(f"unknown node set {kind!r}: one of {NODES}")
+
+
+def make_field(name: str, lo: np.ndarray, hi: np.ndarray):
+    """The analytic field ``name`` (``affine`` or ``smooth``) for a part of bounding box ``lo``, ``hi`` (3,)."""
+    from hot2cold.testing.synthetic import AffineField, UntwistField
+
+    centre = 0.5 * (lo + hi)
+    diag = float(np.linalg.norm(hi - lo))
+    if name == "affine":
+        t = np.array([1.0, -0.6, 0.3])
+        return AffineField.thermal(contraction=2e-4, rotation_deg=0.05, axis=(1.0, 2.0, 3.0),
+                                   translation=1e-4 * diag * t / np.linalg.norm(t), center=centre)
+    if name == "smooth":
+        span = int(np.argmax(hi - lo))
+        axis = np.eye(3)[span]
+        half = 0.5 * float(hi[span] - lo[span])
+        return UntwistField(axis_point=centre, span_axis=axis, untwist_deg_per_mm=np.degrees(1e-3) / half,
+                            stretch_per_mm2=5e-4 * diag / half ** 2, z0=float(centre[span]))
+    raise ValueError(f"unknown field {name!r}: one of {FIELDS}")
+
+
+# ----------------------------------------------------------------------------------------------- the measure
+
+def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
+    """Largest distance (mm) of the exact cold positions of dense samples inside every hot face to the cold
+    face with the same index; ``(max, face, samples)``.
+
+    ``exact_map`` maps hot points ``(m, 3)`` to exact cold points ``(m, 3)``.  The faces are those of the
+    solids (:func:`solid_faces`); the cold part must have as many.  A sample the kernel cannot project counts
+    as ``inf``.
+    """
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.BRep import BRep_Builder
+
+    from hot2cold.kernel.project import Projector
+    from hot2cold.kernel.sampling import face_samples
+
+    hot_faces, cold_faces = solid_faces(hot), solid_faces(cold)
+    if len(hot_faces) != len(cold_faces):
+        raise ValueError(f"the cold part has {len(cold_faces)} faces, the hot one {len(hot_faces)}")
+    compound, builder = TopoDS_Compound(), BRep_Builder()
+    builder.MakeCompound(compound)
+    for f in hot_faces:
+        builder.Add(compound, f)
+    projector = Projector(cold_faces, [])
+    worst, where, count = 0.0, -1, 0
+    for k, (_, points) in enumerate(face_samples(compound, spacing)):
+        _, dist = projector.to_face(k, exact_map(points))
+        count += len(dist)
+        if len(dist) and dist.max() > worst:
+            worst, where = float(dist.max()), k
+    return worst, where, count
+
+
+def one_line(text: str) -> str:
+    """The last 'hot2cold: ...' line of ``text``, else its last non-empty line."""
+    lines = [s.strip() for s in text.splitlines() if s.strip()]
+    for s in reversed(lines):
+        if s.startswith("hot2cold:"):
+            return s
+    return lines[-1] if lines else ""
+
+
+def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path) -> Run:
+    """One run in this process (the child's work): nodes, field, morph by the command line, checks."""
+    from hot2cold.cli import main as cli_main
+    from hot2cold.kernel.step import read_step
+    from hot2cold.kernel.topology import diagonal
+    from hot2cold.kernel.validity import check_solids, face_areas
+
+    run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
+    hot = read_step(path)
+    faces = solid_faces(hot)
+    run.faces = len(faces)
+    lo, hi = box(hot)
+    run.spacing = node_spacing(diagonal(hot), float(face_areas(faces).sum()))
+    points = node_set(hot, nodes_kind, run.spacing)
+    run.nodes = len(points)
+    analytic = make_field(field_name, lo, hi)
+    stem = f"{path.stem}_{nodes_kind}_{field_name}"
+    field_path, cold_path, report_path = (workdir / f"{stem}.npz", workdir / f"{stem}_cold.step",
+                                          workdir / f"{stem}_report.json")
+    np.savez(field_path, points=points, displacements=analytic(points))
+
+    stderr = io.StringIO()
+    start = time.perf_counter()
+    with contextlib.redirect_stderr(stderr):
+        run.exit_code = cli_main(["morph", str(path), str(field_path), "-o", str(cold_path), "--report",
+                                  str(report_path), "-q"])
+    run.seconds = time.perf_counter() - start
+    run.peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    run.message = one_line(stderr.getvalue()).replace(f"{workdir}{os.sep}", "")
+    if report_path.exists():
+        run.delta_max = json.loads(report_path.read_text()).get("delta_max")
+    if run.exit_code != 0 or not cold_path.exists():
+        return run
+
+    cold = read_step(cold_path)
+    checks = check_solids(cold)
+    run.valid = bool(checks) and all(c.valid for c in checks)
+    run.free_edges = sum(c.free_edges for c in checks)
+    run.faces_cold = sum(c.faces for c in checks)
+    if run.faces_cold == run.faces:
+        run.exact_max, run.exact_face, run.samples = exact_error(hot, cold, analytic.exact_map, run.spacing / 2)
+    else:
+        run.notes.append("faces not kept: no exact error")
+    return run
+
+
+# -------------------------------------------------------------------------------------------- the processes
+
+def load(data: dict) -> Run:
+    """A :class:`Run` from its saved dict."""
+    return Run(**{k: v for k, v in data.items() if k in Run.__dataclass_fields__})
+
+
+def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_memory_gb: float | None) -> Run:
+    """:func:`run_here` in a fresh process; a timeout, a crash or a memory limit is recorded, not raised."""
+    with tempfile.TemporaryDirectory(prefix="real_parts_") as tmp:
+        tmp = Path(tmp)
+        out = tmp / "run.json"
+        cmd = [sys.executable, __file__, "--one", str(path), "--nodes", nodes_kind, "--fields", field_name,
+               "--workdir", str(tmp), "--json", str(out)]
+
+        def limit():
+            os.setsid()
+            if max_memory_gb:
+                cap = int(max_memory_gb * 2 ** 30)
+                resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
+        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        with open(tmp / "stderr.txt", "wb") as err:
+            child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, preexec_fn=limit, env=env)
+            start, status, usage = time.perf_counter(), None, None
+            while True:
+                pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+                if pid:
+                    break
+                if time.perf_counter() - start > timeout:
+                    os.killpg(child.pid, signal.SIGKILL)
+                    _, status, usage = os.wait4(child.pid, 0)
+                    status = "timeout"
+                    break
+                time.sleep(0.2)
+            child.returncode = 0        # reaped here; keep Popen from waiting again
+        if out.exists():
+            run = load(json.loads(out.read_text()))
+        else:
+            run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
+            if status == "timeout":
+                run.message = f"timeout after {timeout:.0f} s"
+            else:
+                code = os.waitstatus_to_exitcode(status)
+                tail = one_line((tmp / "stderr.txt").read_text(errors="replace"))
+                run.message = (f"child killed by signal {-code}" if code < 0 else f"child exit {code}") + \
+                    (f": {tail}" if tail else "")
+            run.peak_mb = usage.ru_maxrss / 1024.0
+            run.seconds = time.perf_counter() - start
+        return run
+
+
+# -------------------------------------------------------------------------------------------- the scoreboard
+
+def _num(x, fmt: str) -> str:
+    return "-" if x is None else "inf" if x == float("inf") else format(x, fmt)
+
+
+def scoreboard(runs: list[Run], width: int = 90) -> str:
+    """The table of ``runs`` and the summary line."""
+    head = ("part", "CAD system", "faces", "nodes", "field", "exit", "message", "time s", "peak MB", "valid",
+            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm")
+    rows = []
+    for r in runs:
+        message = r.message.removeprefix("hot2cold: ").removeprefix("error: ")
+        if len(message) > width:
+            message = message[:width - 1] + "…"
+        rows.append((r.part, r.cad, _num(r.faces, "d"), f"{r.nodes_kind} {_num(r.nodes, 'd')}", r.field,
+                     _num(r.exit_code, "d"), message, _num(r.seconds, ".1f"), _num(r.peak_mb, ".0f"),
+                     _num(r.valid, ""), _num(r.free_edges, "d"),
+                     "-" if r.faces_cold is None else "yes" if r.faces_cold == r.faces else f"{r.faces_cold}",
+                     _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e")))
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    lines.append("")
+    lines.append(summary(runs))
+    return "\n".join(lines)
+
+
+def summary(runs: list[Run]) -> str:
+    """"N of M morph (exit 0, valid on read-back, faces kept, 0 free edges); affine within 1e-8 mm on K of
+    A"."""
+    affine = [r for r in runs if r.field == "affine"]
+    return (f"{sum(r.ok for r in runs)} of {len(runs)} morph (exit 0, valid on read-back, faces kept, "
+            f"0 free edges); affine within {AFFINE_TOLERANCE:g} mm on {sum(r.exact for r in affine)} of "
+            f"{len(affine)}")
+
+
+def select(paths: list[Path], names: str | None) -> list[Path]:
+    """The parts whose file name contains one of the comma-separated ``names`` (case-insensitive)."""
+    if not names:
+        return paths
+    wanted = [n.strip().lower() for n in names.split(",") if n.strip()]
+    return [p for p in paths if any(w in p.name.lower() for w in wanted)]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--parts", help="comma-separated parts of file names (default: all)")
+    parser.add_argument("--fields", default=",".join(FIELDS), help=f"comma-separated, of {FIELDS}")
+    parser.add_argument("--nodes", default=",".join(NODES), help=f"comma-separated node sets, of {NODES}")
+    parser.add_argument("--timeout", type=float, default=600.0, help="seconds per run (default 600)")
+    parser.add_argument("--max-memory", type=float, default=8.0, metavar="GB",
+                        help="address-space limit of each run (default 8 GB; 0: none)")
+    parser.add_argument("--json", type=Path, help="save the runs here")
+    parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
+                        help="print the scoreboard of runs saved with --json (several files: joined), run nothing")
+    parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)          # child: one run
+    parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    fields = [f for f in args.fields.split(",") if f]
+    kinds = [n for n in args.nodes.split(",") if n]
+    for f in fields:
+        if f not in FIELDS:
+            parser.error(f"unknown field {f!r}: one of {FIELDS}")
+    for n in kinds:
+        if n not in NODES:
+            parser.error(f"unknown node set {n!r}: one of {NODES}")
+
+    if args.show:
+        runs = [load(r) for path in args.show for r in json.loads(path.read_text())]
+        print(scoreboard(runs))
+        return 0
+    if args.one is not None:
+        run = run_here(args.one, kinds[0], fields[0], args.workdir)
+        args.json.write_text(json.dumps(asdict(run)))
+        return 0
+
+    paths = select(parts(), args.parts)
+    if not paths:
+        parser.error(f"no part matches {args.parts!r}")
+    runs = []
+    for path in paths:
+        for kind in kinds:
+            for name in fields:
+                run = run_child(path, kind, name, args.timeout, args.max_memory or None)
+                runs.append(run)
+                print(f"{run.part} {kind} {name}: exit {run.exit_code} {_num(run.seconds, '.1f')} s "
+                      f"exact {_num(run.exact_max, '.2e')} {run.message}", flush=True)
+                if args.json:
+                    args.json.write_text(json.dumps([asdict(r) for r in runs], indent=1))
+    print()
+    print(scoreboard(runs))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

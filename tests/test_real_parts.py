@@ -1,0 +1,123 @@
+"""The fast part of ``benchmarks/real_parts.py``: its own functions on small cases whose answer is known.
+
+* the exact-geometry measure finds a known departure (a 1e-3 mm shift) and nothing where there is none;
+* the filleted block's affine morph, run as the benchmark runs it, is valid on read-back, closed, keeps its
+  faces and is within 1e-8 mm of the exact cold geometry on dense samples inside every face;
+* a run the command refuses is recorded with its exit code and message; a child that dies or hangs is
+  recorded, not raised; the scoreboard and its summary count them right.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hot2cold.kernel.step import read_step
+
+ROOT = Path(__file__).resolve().parent.parent
+BLOCK = ROOT / "sample_parts" / "filleted_block.step"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("real_parts", ROOT / "benchmarks" / "real_parts.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module          # dataclasses look their module up while it is made
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(spec.name, None)
+
+
+@pytest.fixture(scope="module")
+def block():
+    return read_step(BLOCK)
+
+
+def test_parts_are_the_corpus_and_the_samples(bench):
+    names = [p.name for p in bench.parts()]
+    assert len(names) == 12 + len(list((ROOT / "sample_parts").glob("*.step")))
+    assert "simple_boat.step" in names and "filleted_block.step" in names
+    assert [p.name for p in bench.select(bench.parts(), "boat,HANDLE")] == ["Handle_SO101.step", "simple_boat.step"]
+
+
+def test_cad_system_from_the_step_header(bench):
+    corpus = ROOT / "corpus" / "real_parts"
+    assert bench.cad_system(corpus / "simple_boat.step") == "build123d"
+    assert bench.cad_system(corpus / "Handle_SO101.step").startswith("Autodesk Translation")
+    assert bench.cad_system(corpus / "lower_leg_structure_base.STEP").startswith("SolidWorks 2017")
+    assert bench.cad_system(corpus / "nist_ftc_09_asme1_rd.stp") == "blank"
+
+
+def test_exact_error_finds_a_known_departure(bench, block):
+    zero, _, samples = bench.exact_error(block, block, lambda p: p, 2.0)
+    assert samples > 500
+    assert zero < 1e-10
+    shifted, face, _ = bench.exact_error(block, block, lambda p: p + [0.0, 0.0, 1e-3], 2.0)
+    assert shifted == pytest.approx(1e-3, abs=1e-9)      # the planar top and bottom are off by the shift
+    assert face >= 0
+
+
+def test_fields_are_the_sizes_asked_for(bench, block):
+    lo, hi = bench.box(block)
+    diag = float(np.linalg.norm(hi - lo))
+    points = bench.node_set(block, "fe", bench.node_spacing(diag, 1e4))
+    affine, smooth = bench.make_field("affine", lo, hi), bench.make_field("smooth", lo, hi)
+    assert 1e-5 * diag < np.abs(affine(points)).max() < 1e-3 * diag
+    assert 3e-4 * diag < np.linalg.norm(smooth(points), axis=1).max() < 3e-3 * diag
+    ends = np.array([lo, hi])
+    for field, linear in ((affine, True), (smooth, False)):        # the midpoint rule holds for affine only
+        off = np.abs(field(ends.mean(axis=0, keepdims=True))[0] - field(ends).mean(axis=0)).max()
+        assert (off < 1e-12 * diag) if linear else (off > 1e-5 * diag)
+
+def test_tessellation_nodes_have_none_inside_a_plane(bench, block):
+    nodes = bench.node_set(block, "tess", 1.0)
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    on_bottom = np.abs(nodes[:, 2] - lo[2]) < 1e-9                  # the flat bottom, z = -10 mm
+    assert on_bottom.sum() >= 4
+    inner = on_bottom & np.all((nodes[:, :2] > lo[:2] + 3.0) & (nodes[:, :2] < hi[:2] - 3.0), axis=1)
+    assert not inner.any()           # the plane's triangulation has nodes on its boundary only
+
+def test_affine_morph_of_the_filleted_block_is_exact(bench, tmp_path):
+    run = bench.run_here(BLOCK, "fe", "affine", tmp_path)
+    assert (run.exit_code, run.message) == (0, "")
+    assert run.valid and run.free_edges == 0 and run.faces_cold == run.faces == 18
+    assert run.samples > 1000
+    assert run.exact_max <= bench.AFFINE_TOLERANCE
+    assert run.ok and run.exact
+    assert run.seconds > 0 and run.peak_mb > 0
+
+
+def test_a_refused_run_is_recorded(bench, tmp_path, monkeypatch):
+    # nodes on one corner of the block only: most faces are truly uncovered, the command must refuse
+    monkeypatch.setattr(bench, "node_set", lambda shape, kind, spacing: np.array(
+        [[-30.0, -20.0, -10.0], [-29.0, -20.0, -10.0], [-30.0, -19.0, -10.0], [-30.0, -20.0, -9.0]]))
+    run = bench.run_here(BLOCK, "fe", "affine", tmp_path)
+    assert run.exit_code not in (0, None)
+    assert run.message.startswith("hot2cold: error:") and str(tmp_path) not in run.message
+    assert run.valid is None and run.exact_max is None and not run.ok
+
+
+def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
+    broken = tmp_path / "broken.step"
+    broken.write_text("ISO-10303-21;\nnot a step file\n")
+    died = bench.run_child(broken, "fe", "affine", timeout=120, max_memory_gb=None)
+    assert died.exit_code is None and died.message.startswith("child exit 1")
+    assert died.peak_mb > 0
+    hung = bench.run_child(BLOCK, "fe", "affine", timeout=0.5, max_memory_gb=None)
+    assert hung.exit_code is None and hung.message == "timeout after 0 s"
+
+    good = bench.Run(part="a", path="a", nodes_kind="fe", field="affine", faces=2, exit_code=0, valid=True,
+                     free_edges=0, faces_cold=2, exact_max=1e-12)
+    smooth = bench.Run(part="a", path="a", nodes_kind="fe", field="smooth", faces=2, exit_code=0, valid=True,
+                       free_edges=0, faces_cold=2, exact_max=1e-3)
+    assert bench.load(asdict(died)) == died                         # --json, then --show
+    board = bench.scoreboard([good, smooth, died, hung])
+    assert sum(line.startswith("| ") for line in board.splitlines()) == 5       # the head and 4 rows
+    assert board.endswith("2 of 4 morph (exit 0, valid on read-back, faces kept, 0 free edges); "
+                          "affine within 1e-08 mm on 1 of 3")
