@@ -193,3 +193,27 @@ def test_hot_part_kept_and_blas_left_alone_unless_asked(block_shape, block_nodes
         assert np.array_equal(poles, face.surface.poles)                 # the hot part's kernel, as loaded
         assert np.abs(cold - poles).max() > 1e-3                          # the cold one, moved
     assert result.cold.wrapped.IsSame(result.cold_kernel.shape)
+
+
+def test_a_step_is_written_only_when_it_reads_back_as_valid_closed_solids(tmp_path):
+    """The cold STEP is read back before it is renamed into place: solids that do not come back as they were
+    written (a box missing a face, made a solid, comes back as a shell: no solid) are refused (MorphError),
+    and nothing is left."""
+    import cadquery as cq
+
+    from hot2cold.errors import MorphError
+    from hot2cold.kernel.step import read_back, write_step
+
+    box = cq.Solid.makeBox(10, 10, 10)
+    good = tmp_path / "box.step"
+    write_step(box.wrapped, good, verify=True)
+    assert read_step(good) is not None
+    open_box = cq.Solid.makeSolid(cq.Shell.makeShell(box.Faces()[:-1]))
+    bad = tmp_path / "open.step"
+    with pytest.raises(MorphError, match=r"the cold STEP for .*open\.step reads back with 0 solids of \[\] "
+                                         r"faces, not the 1 of \[5\] written; not written$"):
+        write_step(open_box.wrapped, bad, verify=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["box.step"]
+    with pytest.raises(MorphError, match=r"reads back with 1 solids of \[6\] faces, not the 2 of \[6, 6\] written"):
+        two = cq.Compound.makeCompound([box, box.translate(cq.Vector(20, 0, 0))])
+        read_back(good, two.wrapped, "two.step")

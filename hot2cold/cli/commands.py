@@ -8,9 +8,9 @@ Every output is checked before the morph starts (its folder exists and is writab
 nor another output) and written whole or not at all.
 
 Exit codes: 0 success; 2 unusable input (file, field, option, output path; README "Bad input" lists them);
-3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself (nothing written
-but the report); 5 written, but --tolerance not met;
-6 an output could not be written (none of it is left; the message says what else is written); 70
+3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself, or its STEP file
+does not read back as the valid closed solids written (nothing written but the report); 5 written, but
+--tolerance not met; 6 an output could not be written (none of it is left; the message says what else is written); 70
 internal error; 130 interrupted.
 
 Exit codes of batch: 0 every job ok or skipped (done before from the same inputs); 1 a job failed (the

@@ -1,6 +1,8 @@
 """Reading and writing STEP files (shapes only; names and colours: :mod:`hot2cold.kernel.xcaf`).
 
-Output is written whole or not at all: to a temporary file in the target folder, then renamed.
+Output is written whole or not at all: to a temporary file in the target folder, then renamed.  A cold part
+is read back from that temporary file before the rename (``verify``): its solids must come back valid,
+closed and with the faces that were written, or nothing is written (:class:`~hot2cold.errors.MorphError`).
 """
 from __future__ import annotations
 
@@ -10,13 +12,13 @@ from pathlib import Path
 
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.STEPControl import STEPControl_AsIs, STEPControl_Reader, STEPControl_Writer
-from OCP.TopAbs import TopAbs_SOLID
+from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS_Shape
 
 from ..io.atomic import write_atomically
 from ..io.inputs import check_input_file
-from ..errors import KernelError, StepReadError
+from ..errors import KernelError, MorphError, StepReadError
 
 log = logging.getLogger(__name__)
 
@@ -55,13 +57,14 @@ def read_step(path: str | os.PathLike) -> TopoDS_Shape:
     return shape
 
 
-def write_step(shape: TopoDS_Shape, path: str | os.PathLike) -> None:
-    """Write ``shape`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+def write_step(shape: TopoDS_Shape, path: str | os.PathLike, verify: bool = False) -> None:
+    """Write ``shape`` to ``path`` atomically (temporary file in the same folder, then rename); with
+    ``verify``, only once the file reads back as ``shape``'s valid closed solids (:func:`read_back`)."""
     path = check_output_folder(path)
     writer = STEPControl_Writer()
     if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
         raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
-    write_translated(writer, path)
+    write_translated(writer, path, written=shape if verify else None)
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
@@ -73,12 +76,39 @@ def check_output_folder(path: str | os.PathLike) -> Path:
     return path
 
 
-def write_translated(writer, path: Path, note: str = "") -> None:
+def write_translated(writer, path: Path, note: str = "", written: TopoDS_Shape | None = None) -> None:
     """Write what ``writer`` (a ``STEPControl_Writer`` or ``STEPCAFControl_Writer`` holding the translated
-    part) holds to ``path``, atomically."""
+    part) holds to ``path``, atomically; when ``written`` (the shape translated) is given, the temporary file
+    is read back and checked against it first (:func:`read_back`)."""
     def write(tmp: str) -> None:
         if writer.Write(tmp) != IFSelect_RetDone:
             raise KernelError(f"the kernel could not write STEP file {path}")
+        if written is not None:
+            read_back(tmp, written, path)
 
     write_atomically([(path, write)])
     log.info("wrote %s%s", path, note)
+
+
+def read_back(file: str | os.PathLike, written: TopoDS_Shape, path: str | os.PathLike) -> None:
+    """Raise :class:`MorphError` unless the STEP ``file`` holds ``written``'s solids as valid closed solids
+    (``BRepCheck_Analyzer``, no free edge) with the same numbers of faces (compared as sorted lists: an
+    assembly's instances need not come back in the order they were written).  ``path`` names the output in
+    the message.  What a morph's own checks pass can still fail here: the STEP writer approximates, and a
+    tolerance the kernel accepted in memory may not survive the file."""
+    from .topology import shape_map
+    from .validity import check_solids
+
+    reader = STEPControl_Reader()
+    if reader.ReadFile(str(file)) != IFSelect_RetDone or reader.TransferRoots() == 0:
+        raise MorphError(f"the cold STEP for {path} does not read back (reader status); not written")
+    back = check_solids(reader.OneShape())
+    sent = sorted(len(shape_map(solid, TopAbs_FACE)) for solid in shape_map(written, TopAbs_SOLID))
+    if sorted(c.faces for c in back) != sent:
+        raise MorphError(f"the cold STEP for {path} reads back with {len(back)} solids of "
+                         f"{sorted(c.faces for c in back)} faces, not the {len(sent)} of {sent} written; not written")
+    for s, check in enumerate(back):
+        if not check.valid or not check.closed:
+            what = "not valid (BRepCheck)" if not check.valid else f"open ({check.free_edges} free edges)"
+            raise MorphError(f"cold solid {s} of {path} is {what} when its STEP file is read back; not written")
+    log.info("read back %s: %d valid closed solids", path, len(back))

@@ -482,8 +482,9 @@ def cold_document(cold: TopoDS_Shape, styles: Styles) -> TDocStd_Document:
     return document
 
 
-def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLike) -> None:
-    """Write ``cold`` to ``path`` through XCAF with the names and colours of ``styles``, atomically.
+def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLike, verify: bool = False) -> None:
+    """Write ``cold`` to ``path`` through XCAF with the names and colours of ``styles``, atomically; with
+    ``verify``, only once it reads back as ``cold``'s valid closed solids (:func:`.step.read_back`).
 
     Raises :class:`KernelError` when the kernel cannot build or translate the document, :class:`OutputError`
     when the file cannot be written.
@@ -503,4 +504,5 @@ def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLik
             raise KernelError(f"the kernel could not translate the cold part to STEP for {path}: {exc}") from exc
         if not transferred:
             raise KernelError(f"the kernel could not translate the cold part to STEP for {path}")
-        write_translated(writer, path, " with the hot file's names, colours and assembly tree")
+        write_translated(writer, path, " with the hot file's names, colours and assembly tree",
+                         written=cold if verify else None)

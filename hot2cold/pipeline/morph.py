@@ -110,20 +110,21 @@ class MorphResult:
 
         Raises
         ------
-        MorphError : the cold part fails :func:`check_result` (a result of ``morph(..., check=False)``);
-            nothing is written.
+        MorphError : the cold part fails :func:`check_result` (a result of ``morph(..., check=False)``), or
+            the file, read back, does not hold its solids valid, closed and with their faces
+            (:func:`hot2cold.kernel.step.read_back`); nothing is written.
         """
         from ..kernel.xcaf import write_step_styles
 
         check_result(self)
         styles = self.part.styles
         if styles is not None and styles.placed:
-            write_step_styles(self.cold_kernel.shape, styles, path)
+            write_step_styles(self.cold_kernel.shape, styles, path, verify=True)
             return
         if styles is not None:
             log.warning("the hot STEP's names and colours could not be placed on the cold part; "
                         "writing %s without them", path)
-        write_step(self.cold_kernel.shape, path)
+        write_step(self.cold_kernel.shape, path, verify=True)
 
 
 @dataclass(frozen=True, eq=False)
