@@ -35,7 +35,7 @@ from pathlib import Path
 import cadquery as cq
 
 import hot2cold
-from hot2cold import morph, read_field
+from hot2cold import Settings, morph, read_field
 
 exaggerate = 1.0
 show_nodes = True
@@ -80,7 +80,10 @@ def node_points(points, displacements, scale, count):
 folder = find_sample_dir(sample_dir)
 field = read_field(folder / FILES["field"])
 scale = float(exaggerate)
-result = morph(folder / FILES["step"], (field.points, scale * field.displacements))
+# the field times exaggerate moves the blade farther than a hot-to-cold field does: the bound scales with it
+bound = Settings().max_displacement_rel * max(scale, 1.0)
+result = morph(folder / FILES["step"], (field.points, scale * field.displacements),
+               Settings(max_displacement_rel=bound))
 
 # show_object's options are passed as a fresh dict each time (CQGI's default dict is shared between calls).
 # In CQ-editor 0.7 "alpha" is the opacity: 1 opaque, 0 invisible.

@@ -291,6 +291,38 @@ def test_field_in_the_wrong_units(tmp_path, box, out, capsys, scale, pattern):
              + pattern, out)
 
 
+def test_field_in_metres_on_a_part_at_the_origin(tmp_path, out, capsys):
+    """A box with a corner at the origin and its field in metres: every node lies "on" the part, near the
+    origin, yet the field spans a thousandth of it."""
+    import cadquery as cq
+    corner = cq.Workplane().box(10, 10, 10, centered=False).val()
+    hot = tmp_path / "corner.step"
+    corner.exportStep(str(hot))
+    nodes = fe_surface_nodes(corner.wrapped, 1.0, seed=1)[0]
+    field = _write_field(tmp_path / "metres.csv", nodes * 1e-3, FIELD(nodes) * 1e-3)
+    _refused(capsys, _morph(hot, field, out), 2,
+             r".*metres\.csv spans 0\.01732 mm but the part 17\.32 mm: its nodes crowd around \(0\.00\d+, 0\.00\d+, "
+             r"0\.00\d+\) mm, \d+ % of them on the part there: the field looks like metres: use --field-units m "
+             r"\(units='m'\)$", out)
+
+
+def test_displacements_of_the_parts_size(tmp_path, box, out, capsys):
+    """Cold positions given in the displacement columns: the box's nodes move by half its diagonal."""
+    nodes = box[1]
+    field = _write_field(tmp_path / "cold_positions.csv", nodes, nodes + FIELD(nodes))
+    _refused(capsys, _morph(box[0], field, out), 2,
+             r".*cold_positions\.csv moves the node at \(.*\) mm \(row \d+ from 0\) by 8\.8\d+ mm, 51 % of the "
+             r"part's 17\.32 mm diagonal, more than the 10 % a hot-to-cold field moves a part: are the columns "
+             r"dx,dy,dz cold positions rather than displacements, or is it another part's field\? If it is right, "
+             r"raise --max-displacement-rel \(Settings\.max_displacement_rel\)$", out)
+    # the override, for the rare honest field: the box doubled in size, as the field says
+    report = tmp_path / "r.json"
+    assert main(_morph(box[0], field, out, "--max-displacement-rel", "0.6", "--report", str(report), "-q")) == 0
+    assert capsys.readouterr().err == ""
+    volume = json.loads(report.read_text())["solids"][0]
+    assert volume["volume_cold"] == pytest.approx(1.996 ** 3 * volume["volume_hot"], rel=1e-3)
+
+
 def test_nodes_far_from_the_part(tmp_path, box, out, capsys):
     nodes = box[1]
     field = _write_field(tmp_path / "far.csv", nodes + 500.0, FIELD(nodes))
@@ -354,12 +386,18 @@ def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     assert max(f["artificial_nodes"] for f in data["faces"]) > 0
 
 
+#: The fields that turn a part inside out, fold a face or make a part cross itself move it by 11 to 58 % of
+#: its diagonal, beyond what a hot-to-cold field does (they are refused as such by default,
+#: test_displacements_of_the_parts_size): the checks of the cold part are reached past that bound.
+_LARGE = ("--max-displacement-rel", "1")
+
+
 def test_displacements_that_turn_the_part_inside_out(tmp_path, box, out, capsys):
     """x -> -x: every face turns over, the volume changes sign; the report is written, the STEP is not."""
     nodes = box[1]
     field = _write_field(tmp_path / "mirror.csv", nodes, np.column_stack([-2.0 * nodes[:, 0], 0 * nodes[:, :2]]))
     report = tmp_path / "r.json"
-    _refused(capsys, _morph(box[0], field, out, "--report", str(report)), 4,
+    _refused(capsys, _morph(box[0], field, out, "--report", str(report), *_LARGE), 4,
              r"cold solid 0 is turned inside out \(volume hot 1000 mm³, cold -1000 mm³\) \(and 4 more problems, see "
              r"the log\): the displacements are too large for this part \(check the field's units and scale, and that "
              r"it belongs to this part\); not written$", out)
@@ -381,11 +419,35 @@ def test_displacements_that_fold_a_face(tmp_path, out, capsys):
     squeeze = -2.5 * np.exp(-np.hypot(nodes[:, 0], nodes[:, 1]) ** 2 / 8.0) * (nodes[:, 2] > 1.0)
     field = _write_field(tmp_path / "fold.csv", nodes,
                          np.column_stack([squeeze * nodes[:, 0], squeeze * nodes[:, 1], 0 * squeeze]))
-    _refused(capsys, _morph(hot, field, out), 4,
+    _refused(capsys, _morph(hot, field, out, *_LARGE), 4,
              r"cold solid 0 folds: face \d+ turns over at \d+ of \d+ points, e\.g\. near \(.*\) mm, the "
              r"field moving it by up to [\d.]+ mm \(the part is 28\.66 mm across\): the displacements are too large "
              r"for this part "
              r"\(check the field's units and scale, and that it belongs to this part\); not written$", out)
+
+
+def test_field_of_another_part_with_extrapolate(tmp_path, out, capsys):
+    """The bundled blade's field on the bundled filleted block, with --extrapolate: the few nodes that fall on
+    the block move by 0.13 mm at the most, the faces extrapolated from them by up to 1.5 mm."""
+    samples = Path(__file__).resolve().parents[1] / "sample_parts"
+    _refused(capsys, _morph(samples / "filleted_block.step", samples / "twisted_blade_field.csv", out,
+                            "--extrapolate"), 4,
+             r"cold solid 0 moves face \d+ by up to [\d.]+ mm near \(.*\) mm, farther than the field moves any node "
+             r"\(0\.1309 mm; up to 1\.5 x that \+ 0\.0762 mm accepted\) \(and \d+ more problems, see the log\): "
+             r"the displacements are too large for this part .*; not written$", out)
+
+
+def test_volume_change_beyond_the_fields_strain(box, out, capsys, monkeypatch):
+    """A cold solid whose volume changed by more than the field's strain allows.  No honest morph does that
+    (the check guards against a fit gone wrong), so the bound is simulated: the box's thermal field shrinks
+    it by 1.2 %, against a bound cut to 0.01 %."""
+    from hot2cold.pipeline import checks
+    monkeypatch.setattr(checks, "_VOLUME_MARGIN", 0.0)
+    monkeypatch.setattr(checks, "_VOLUME_FLOOR", 1e-4)
+    _refused(capsys, _morph(box[0], box[2], out), 4,
+             r"cold solid 0 changes its volume from 1000 mm³ to 988\.\d+ mm³ \(-1\.2 %\), more than the 0\.01 % "
+             r"the field's largest strain \(0\.00\d+\) allows: the displacements are too large for this part .*; "
+             r"not written$", out)
 
 
 def _bent_fork(tmp_path, strength: float):
@@ -403,7 +465,7 @@ def _bent_fork(tmp_path, strength: float):
 def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
     """A fork whose two tines are bent towards each other until they pass through each other."""
     hot, field = _bent_fork(tmp_path, 0.012)
-    _refused(capsys, _morph(hot, field, out), 4,
+    _refused(capsys, _morph(hot, field, out, *_LARGE), 4,
              r"cold solid 0 crosses itself: (edges|faces|edge \d+ and face) \d+ and \d+ intersect near \(.*\) mm.*: "
              r"the displacements are too large for this part .*; not written$", out)
 
@@ -419,15 +481,16 @@ def test_morph_from_python_refuses_an_invalid_part(case, tmp_path, box, out):
     """From Python as from the command line: ``morph`` raises MorphError on a cold part that fails the
     checks; with ``check=False`` it returns the part, whose report says so, and ``write_step`` refuses it
     and leaves no file."""
-    from hot2cold import MorphError, morph
+    from hot2cold import MorphError, Settings, morph
 
+    large = Settings(max_displacement_rel=1.0)
     hot, field = (box[0], _mirrored(box)) if case == "inside out" else _bent_fork(tmp_path, 0.012)
     what = (r"is turned inside out \(volume hot 1000 mm³, cold -1000 mm³\) \(and 4 more problems, see the log\)"
             if case == "inside out" else r"crosses itself: .*")
     refused = rf"^cold solid 0 {what}: the displacements are too large for this part .*; not written$"
     with pytest.raises(MorphError, match=refused):
-        morph(hot, field)
-    result = morph(hot, field, check=False)
+        morph(hot, field, large)
+    result = morph(hot, field, large, check=False)
     assert not result.report.valid and result.problems
     with pytest.raises(MorphError, match=refused):
         result.write_step(out)

@@ -68,6 +68,19 @@ def to_number(value, folder: Path) -> float:
         raise ValueError(f"must be a number (mm), got {value!r}") from None
 
 
+def to_share(value, folder: Path) -> float:
+    """A positive number, a share (of the part's diagonal)."""
+    try:
+        if isinstance(value, bool):
+            raise ValueError
+        share = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a positive number (a share of the part's diagonal), got {value!r}") from None
+    if not share > 0:
+        raise ValueError(f"must be a positive number (a share of the part's diagonal), got {value!r}")
+    return share
+
+
 def to_count(value, folder: Path) -> int:
     try:
         if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
@@ -137,6 +150,11 @@ class MorphOptions:
         False, flag="--extrapolate", convert=to_flag,
         help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
         "warning); without it such a field is refused")
+    max_displacement_rel: float | None = _option(
+        None, flag="--max-displacement-rel", convert=to_share, type=float, metavar="SHARE",
+        help="largest node displacement accepted, as a share of the part's diagonal (default 0.1): a field "
+        "that moves the part farther is refused as no hot-to-cold field (cold positions given as "
+        "displacements, another part's field)")
 
     @staticmethod
     def names() -> tuple[str, ...]:
@@ -168,9 +186,11 @@ class MorphOptions:
         """:class:`~hot2cold.settings.Settings` from these options (None: the default); :class:`InputError`
         on a bad value."""
         try:
-            rounds = {} if self.max_refinements is None else {"max_refinements": self.max_refinements}
+            given = {name: value for name, value in (("max_refinements", self.max_refinements),
+                                                      ("max_displacement_rel", self.max_displacement_rel))
+                     if value is not None}
             return Settings(node_distance=self.node_distance, edge_distance=self.edge_distance,
-                            tolerance=self.tolerance, extrapolate=self.extrapolate, **rounds)
+                            tolerance=self.tolerance, extrapolate=self.extrapolate, **given)
         except ValueError as exc:
             raise InputError(str(exc)) from exc
 

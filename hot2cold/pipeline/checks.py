@@ -3,7 +3,11 @@
 * :func:`check_hot`: the hot part is a valid closed solid (else :class:`InputError` naming the face at fault);
 * :func:`check_coverage`: the field lies on the part, in the part's units, and covers every face (else
   :class:`FieldError`, or a warning with ``Settings.extrapolate``);
-* :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself;
+* :func:`check_coverage` also refuses a field whose displacements are of the part's size
+  (``Settings.max_displacement_rel``);
+* :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself, no face moved
+  farther than the field moves its nodes, no volume changed beyond what the field's strain allows
+  (:class:`FieldScale`);
 * :func:`check_result`: refuses a result that failed any of them or that the kernel finds invalid or open
   (:class:`MorphError`); :func:`~hot2cold.pipeline.morph.morph` calls it (unless ``check=False``) and so does
   :meth:`~hot2cold.pipeline.morph.MorphResult.write_step` before it writes.
@@ -11,6 +15,7 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -143,11 +148,18 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     extent = float(np.linalg.norm(np.ptp(field.points, axis=0))) if len(field) > 1 else 0.0
     ratio = extent / part.diagonal
     used = float(np.mean(cls.used))
-    hint = next((text for factor, text in _UNIT_HINTS if 0.5 * factor <= ratio <= 2.0 * factor), None)
+    factor, hint = next(((f, text) for f, text in _UNIT_HINTS if 0.5 * f <= ratio <= 2.0 * f), (None, None))
     source = field.source or "the field"
     if hint and used < 0.5:
         raise FieldError(f"{source} spans {extent:.4g} mm but the part {part.diagonal:.4g} mm "
                          f"and {100 * (1 - used):.0f} % of its nodes are off the part: {hint}")
+    if hint and factor < 1:
+        # a field a unit factor smaller than the part cannot cover it, however many of its nodes are "on" it:
+        # in metres, on a part whose face touches the origin, the nodes crowd onto the part there
+        centre = field.points.mean(axis=0)
+        raise FieldError(f"{source} spans {extent:.4g} mm but the part {part.diagonal:.4g} mm: its nodes crowd "
+                         f"around ({', '.join(f'{x:.3g}' for x in centre)}) mm, {100 * used:.0f} % of them "
+                         f"on the part there: {hint}")
     if used == 0:
         centre = part.vertices.mean(axis=0) if len(part.vertices) else np.zeros(3)
         spread = np.linalg.norm(field.points - centre, axis=1)
@@ -156,6 +168,7 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
             f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
             f"this part, or raise --node-distance")
+    _check_displacements(part, cls, field, settings)
     inner, boundary, edges_covered = face_coverage(part, cls)
     free = np.array([face.solid < 0 for face in part.faces], bool)
     bare_free = np.flatnonzero(free & (inner + boundary == 0))
@@ -202,6 +215,84 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
                      f"--extrapolate (Settings.extrapolate) to morph such faces from the field of the others")
 
 
+def _check_displacements(part: Part, cls: Classification, field: DisplacementField, settings: Settings) -> None:
+    """Raise :class:`FieldError` when a node on the part moves farther than ``settings.max_displacement_rel``
+    times the part's diagonal: a field whose displacements are of the part's size is no hot-to-cold field
+    (cold positions given as displacements, another part's field, displacements in µm written as mm)."""
+    moved = np.where(cls.used, np.linalg.norm(field.displacements, axis=1), -1.0)
+    k = int(np.argmax(moved))
+    share = moved[k] / part.diagonal
+    log.info("largest displacement %.4g mm (node at row %d), %.3g %% of the part's %.4g mm diagonal", moved[k],
+             cls.node[k], 100 * share, part.diagonal)
+    if share <= settings.max_displacement_rel:
+        return
+    raise FieldError(
+        f"{field.source or 'the field'} moves the node at ({', '.join(f'{x:.4g}' for x in field.points[k])}) mm "
+        f"(row {cls.node[k]} from 0) by {moved[k]:.4g} mm, {100 * share:.3g} % of the part's {part.diagonal:.4g} mm "
+        f"diagonal, more than the {100 * settings.max_displacement_rel:.3g} % a hot-to-cold field moves a part: "
+        f"are the columns dx,dy,dz cold positions rather than displacements, or is it another part's field? "
+        f"If it is right, raise --max-displacement-rel (Settings.max_displacement_rel)")
+
+
+#: The cold part may move a face up to this many times the field's largest displacement (plus the node
+#: distance): the fit of a face between its nodes overshoots a little, never by half the largest displacement.
+_MOVE_MARGIN = 1.5
+#: A cold solid's volume may change by up to this many times what the field's largest strain allows ...
+_VOLUME_MARGIN = 3.0
+#: ... plus this share of the hot volume (the fit, and the kernel's volume integration, for a field that
+#: hardly strains the part: a rigid motion).
+_VOLUME_FLOOR = 1e-3
+#: Nearest neighbours of each node whose displacements estimate the field's strain.
+_STRAIN_NEIGHBOURS = 8
+
+
+@dataclass(frozen=True)
+class FieldScale:
+    """How far and how much the field moves and strains the part: the bounds of the checks of the cold part.
+
+    Attributes
+    ----------
+    largest : float, the largest displacement (mm) of a node on the part.
+    strain : float, the field's largest strain, estimated as the largest ``|Δu_i - Δu_j| / |x_i - x_j|``
+        over the used nodes and their ``_STRAIN_NEIGHBOURS`` nearest neighbours (a Lipschitz constant L of
+        the displacement: a map ``x + u(x)`` with it changes a volume by a factor between ``(1 - L)^3`` and
+        ``(1 + L)^3``).  The tangent planes of a closed surface take every direction, so the nodes on it see
+        every component of the gradient somewhere; nodes on both sides of a gap narrower than the node
+        spacing make it larger, never smaller (a looser bound).
+    reach : float, the node distance (mm), the slack of the move bound.
+    """
+
+    largest: float
+    strain: float
+    reach: float
+
+    @classmethod
+    def of(cls, classification: Classification, field: DisplacementField) -> FieldScale:
+        """The scale of the nodes of ``field`` that ``classification`` uses (one row each)."""
+        used = classification.used
+        points, disp = field.points[used], field.displacements[used]
+        largest = float(np.linalg.norm(disp, axis=1).max()) if len(disp) else 0.0
+        strain = 0.0
+        if len(points) > 1:
+            k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
+            d, j = cKDTree(points).query(points, k=k)
+            du = np.linalg.norm(disp[j[:, 1:]] - disp[:, None, :], axis=2)
+            apart = d[:, 1:] > 0           # the rows of one node that feeds two solids are one point
+            strain = float((du[apart] / d[:, 1:][apart]).max()) if apart.any() else 0.0
+        return cls(largest, strain, classification.node_distance)
+
+    @property
+    def move_bound(self) -> float:
+        """The farthest (mm) a cold face may be from the hot one: ``_MOVE_MARGIN`` x largest + reach."""
+        return _MOVE_MARGIN * self.largest + self.reach
+
+    @property
+    def volume_bound(self) -> float:
+        """The largest ``|V_cold / V_hot - 1|`` accepted: ``_VOLUME_MARGIN ((1 + strain)^3 - 1) +
+        _VOLUME_FLOOR``."""
+        return _VOLUME_MARGIN * ((1.0 + self.strain) ** 3 - 1.0) + _VOLUME_FLOOR
+
+
 def _face_at(part: Part, k: int) -> str:
     """``face k near (x, y, z) mm``: a point of face ``k`` at the middle of its parameter box."""
     u0, u1, v0, v1 = part.faces[k].uv_box
@@ -220,11 +311,14 @@ _CHECK_SPACING, _CHECK_MOST = 1 / 150, 200
 
 
 def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,
-               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck]) -> dict[int, list[str]]:
+               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale
+               ) -> dict[int, list[str]]:
     """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
-    solid: turned inside out (its volume changed sign), a face folded over (somewhere on a grid over its
-    trimmed domain the normal ``S_u x S_v`` of the cold surface points against the hot one's), or crossing
-    itself.  ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid.
+    solid: turned inside out (its volume changed sign), its volume changed by more than the field's strain
+    allows (``scale.volume_bound``), a face folded over (somewhere on a grid over its trimmed domain the
+    normal ``S_u x S_v`` of the cold surface points against the hot one's), a face moved farther than the
+    field moves any node (a point of that grid farther than ``scale.move_bound`` from its hot position), or
+    crossing itself.  ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid.
 
     The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
     1 to 3 s on the bundled real parts, so it is run only where a gap of the part may have closed: two
@@ -238,14 +332,33 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
         if hot.volume > 0 and not cold.volume > 0:
             problems.setdefault(s, []).append(
                 f"is turned inside out (volume hot {hot.volume:.6g} mm³, cold {cold.volume:.6g} mm³)")
+        elif hot.volume > 0:
+            change = cold.volume / hot.volume - 1.0
+            log.info("solid %d: volume hot %.6g mm³, cold %.6g mm³ (%+.3g %%; %.3g %% allowed by the field's "
+                     "largest strain %.3g)", s, hot.volume, cold.volume, 100 * change, 100 * scale.volume_bound,
+                     scale.strain)
+            if abs(change) > scale.volume_bound:
+                problems.setdefault(s, []).append(
+                    f"changes its volume from {hot.volume:.6g} mm³ to {cold.volume:.6g} mm³ ({100 * change:+.3g} %), "
+                    f"more than the {100 * scale.volume_bound:.3g} % the field's largest strain "
+                    f"({scale.strain:.3g}) allows")
     spacing = _CHECK_SPACING * part.diagonal
     hot_points, cold_points = [], []
+    farthest = (0.0, -1)
     for face, fm in zip(part.faces, face_morphs):
         uv = _check_grid(face, spacing, projector)
         (hot, hot_n), (cold, cold_n) = _points_and_normals(face.surface, fm.surface, uv)
         hot_points.append(hot)
         cold_points.append(cold)
         over = np.flatnonzero(np.einsum("ij,ij->i", hot_n, cold_n) < 0)    # NaN (no normal) compares False
+        moves = np.linalg.norm(cold - hot, axis=1)
+        farthest = max(farthest, (float(moves.max()) if len(moves) else 0.0, face.index))
+        if len(moves) and moves.max() > scale.move_bound:
+            k = int(np.argmax(moves))
+            problems.setdefault(face.solid, []).append(
+                f"moves face {face.index} by up to {moves[k]:.4g} mm near "
+                f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, farther than the field moves any node "
+                f"({scale.largest:.4g} mm; up to {_MOVE_MARGIN:g} x that + {scale.reach:.3g} mm accepted)")
         if len(over):
             k = over[0]
             moved = np.linalg.norm(cold - hot, axis=1).max()
@@ -253,6 +366,8 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
                 f"folds: face {face.index} turns over at {len(over)} of {len(uv)} points, e.g. near "
                 f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, the field moving it by up to {moved:.3g} mm "
                 f"(the part is {part.diagonal:.4g} mm across)")
+    log.info("the cold part moves face %d farthest, by %.4g mm (%.4g mm accepted: the field's largest "
+             "displacement %.4g mm)", farthest[1], farthest[0], scale.move_bound, scale.largest)
     hot, cold = np.concatenate(hot_points), np.concatenate(cold_points)
     pairs = cKDTree(cold).query_pairs(2.0 * spacing, output_type="ndarray")
     if len(pairs):

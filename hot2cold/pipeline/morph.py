@@ -26,7 +26,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .artificial import FieldEstimator
-from .checks import check_cold, check_coverage, check_hot, check_result
+from .checks import FieldScale, check_cold, check_coverage, check_hot, check_result
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
@@ -322,6 +322,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
         field = field.take(cls.node)
     check_coverage(part, cls, field, settings)
+    scale = FieldScale.of(cls, field)
     stages.lap("classify")
     stages.progress("classify")
 
@@ -362,7 +363,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     gaps = fit_tolerances(cold)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
-    problems = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks)
+    problems = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale)
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
     stages.progress("sew")
