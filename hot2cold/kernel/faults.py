@@ -74,14 +74,16 @@ def _statuses(analyzer: BRepCheck_Analyzer, shape, context) -> list[str]:
 def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
     """The faults of ``solid`` (valid: none): each face of ``faces`` (pairs of the number to report and the
     face, for the solid's faces) that ``BRepCheck_Analyzer`` refuses, or the solid's own when none is."""
+    from .topology import shape_map     # topology builds on this module
+
     analyzer = BRepCheck_Analyzer(solid)
     if analyzer.IsValid():
         return []
     out = []
     for k, face in faces:
-        if BRepCheck_Analyzer(face).IsValid():
-            continue
         local = BRepCheck_Analyzer(face)
+        if local.IsValid():
+            continue
         found = _statuses(local, face, None)
         for kind in (TopAbs_WIRE, TopAbs_EDGE, TopAbs_VERTEX):
             explorer = TopExp_Explorer(face, kind)
@@ -91,23 +93,12 @@ def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
         out.append(Fault(k, describe_face(face, k), tuple(dict.fromkeys(found))))
     if out:
         return out
+    shells = shape_map(solid, TopAbs_SHELL)
     found = _statuses(analyzer, solid, None)
-    explorer = TopExp_Explorer(solid, TopAbs_SHELL)
-    while explorer.More():
-        found += _statuses(analyzer, explorer.Current(), solid) + _statuses(analyzer, explorer.Current(), None)
-        explorer.Next()
+    for shell in shells:
+        found += _statuses(analyzer, shell, solid) + _statuses(analyzer, shell, None)
     # the first face whose status within a shell is not clean (e.g. badly oriented)
     faulty = next(((k, face) for k, face in faces
-                   if _statuses(analyzer, face, None) or any(_statuses(analyzer, face, s) for s in _shells(solid))),
-                  None)
+                   if _statuses(analyzer, face, None) or any(_statuses(analyzer, face, s) for s in shells)), None)
     where = "its shell" + (f" at {describe_face(faulty[1], faulty[0])}" if faulty else "")
     return [Fault(faulty[0] if faulty else None, where, tuple(dict.fromkeys(found)))]
-
-
-def _shells(solid) -> list:
-    explorer, out = TopExp_Explorer(solid, TopAbs_SHELL), []
-    while explorer.More():
-        out.append(explorer.Current())
-        explorer.Next()
-    return out
-

@@ -22,7 +22,6 @@ from OCP.BRep import BRep_Tool
 from OCP.BRepBndLib import BRepBndLib
 from OCP.BRep import BRep_Builder
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
-from OCP.BRepCheck import BRepCheck_Analyzer
 from OCP.BRepTools import BRepTools
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID, TopAbs_VERTEX
@@ -160,14 +159,14 @@ def _convert(shape: TopoDS_Shape) -> TopoDS_Shape:
     raise KernelError(f"B-spline conversion of the part failed (on no face alone): {failure}") from failure
 
 
-def _into_first_period(face, surface: Geom_BSplineSurface, name: str) -> None:
+def _into_first_period(face, surface: Geom_BSplineSurface, index: int) -> None:
     """Bring ``face``'s parameters into its periodic surface's first period, in place, before the surface is
     made non-periodic (which keeps only that period).
 
     A periodic direction whose face parameters lie a whole number of periods away (a torus face of an
     Autodesk export runs over u 5.34 to 11.63 on a surface of 0 to 2 pi) has the face's pcurves moved by those
     periods; one that straddles the period's end has the surface's origin set where the face begins (a knot
-    inserted there, the geometry unchanged), so that one period holds the whole face.  ``name`` names the face
+    inserted there, the geometry unchanged), so that one period holds the whole face.  ``index`` numbers the face
     in a message.
     """
     bounds = BRepTools.UVBounds_s(face)
@@ -182,7 +181,8 @@ def _into_first_period(face, surface: Geom_BSplineSurface, name: str) -> None:
         if lo >= first - tol and hi <= last + tol:
             continue
         if hi - lo > period * (1 + 1e-7):    # pcurves overshooting a whole turn: clipped to the domain later
-            log.debug("%s runs over %.6g in %s, more than its surface's period %.6g", name, hi - lo, "uv"[d], period)
+            log.debug("face %d runs over %.6g in %s, more than its surface's period %.6g", index, hi - lo, "uv"[d],
+                      period)
             continue
         turns = np.floor((lo - first + tol) / period)
         shift[d] = -turns * period
@@ -231,20 +231,6 @@ def _move_pcurves(face, by: gp_Vec2d) -> None:
             builder.UpdateEdge(forward, first, face, tol)
 
 
-def _check_conversion(source: TopoDS_Shape, hot: TopoDS_Shape) -> None:
-    """Refuse a converted part whose solid the kernel finds invalid: :class:`InputError` naming the face when the
-    solid was invalid as given (a broken input), else :class:`KernelError` naming the face the conversion
-    broke."""
-    faces = index_map(hot, TopAbs_FACE)
-    for s, solid in enumerate(shape_map(hot, TopAbs_SOLID)):
-        if BRepCheck_Analyzer(solid).IsValid() or _open(solid):     # an open solid: refused by check_hot
-            continue
-        _refuse_broken(source)
-        faults = solid_faults(solid, [(faces.FindIndex(f) - 1, f) for f in shape_map(solid, TopAbs_FACE)])
-        raise KernelError(f"B-spline conversion made solid {s} invalid: {faults[0]}"
-                          + (f" (and {len(faults) - 1} more)" if len(faults) > 1 else ""))
-
-
 def _open(solid) -> bool:
     """Whether ``solid`` has free edges (an open shell, which BRepCheck refuses too)."""
     from .validity import free_edges     # validity builds on this module
@@ -263,15 +249,25 @@ def _refuse_broken(shape: TopoDS_Shape) -> None:
 def broken_solid(shape: TopoDS_Shape) -> str | None:
     """"hot solid S is not valid: face F (Plane, near (x, y, z) mm): <BRepCheck statuses>" for the first solid of
     ``shape`` that ``BRepCheck_Analyzer`` refuses, or None when every solid is valid."""
-    faces = index_map(shape, TopAbs_FACE)
     for s, solid in enumerate(shape_map(shape, TopAbs_SOLID)):
         if _open(solid):     # named as open by check_hot
             continue
-        broken = solid_faults(solid, [(faces.FindIndex(f) - 1, f) for f in shape_map(solid, TopAbs_FACE)])
-        if broken:
-            return (f"hot solid {s} is not valid: {broken[0]}"
-                    + (f" (and {len(broken) - 1} more)" if len(broken) > 1 else ""))
+        faults = solid_fault(shape, s)
+        if faults:
+            return f"hot solid {s} is not valid: {faults}"
     return None
+
+
+def solid_fault(shape: TopoDS_Shape, s: int) -> str | None:
+    """What ``BRepCheck_Analyzer`` finds wrong with solid ``s`` of ``shape``: "face F (Plane, near (x, y, z) mm):
+    <statuses>" for the first face at fault, "(and N more)" for the others; None when the solid is valid.
+    Faces are numbered as in ``shape``."""
+    faces = index_map(shape, TopAbs_FACE)
+    solid = shape_map(shape, TopAbs_SOLID)[s]
+    faults = solid_faults(solid, [(faces.FindIndex(f) - 1, f) for f in shape_map(solid, TopAbs_FACE)])
+    if not faults:
+        return None
+    return f"{faults[0]}" + (f" (and {len(faults) - 1} more)" if len(faults) > 1 else "")
 
 
 def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
@@ -285,9 +281,9 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
     try:
         hot = _convert(shape)
         # Normalise the hot copy's geometry, then copy it: hot and work share parameterisations exactly.
-        for k, (face, given) in enumerate(zip(shape_map(hot, TopAbs_FACE), shape_map(shape, TopAbs_FACE))):
+        for k, face in enumerate(shape_map(hot, TopAbs_FACE)):
             surface = bspline_surface(face)[0]
-            _into_first_period(face, surface, describe_face(given, k))
+            _into_first_period(face, surface, k)
             _normalise_surface(surface)
     except KernelError:
         _refuse_broken(shape)     # a broken input is named as such, not as a failure of the conversion
@@ -296,7 +292,6 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
         if not BRep_Tool.Degenerated_s(edge):
             first, last = BRep_Tool.Range_s(edge)
             _normalise_curve(bspline_curve(edge)[0], first, last)
-    _check_conversion(shape, hot)
     work = BRepBuilderAPI_Copy(hot, True, False).Shape()
 
     faces = shape_map(work, TopAbs_FACE)

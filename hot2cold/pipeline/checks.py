@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
-from ..errors import FieldError, InputError, MorphError
+from ..errors import FieldError, InputError, KernelError, MorphError
 from .classify import curve_length
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
@@ -31,7 +31,7 @@ from ..core.domain import Trim
 from ..core.model import Classification, Part, Role
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
-from ..kernel.topology import broken_solid
+from ..kernel.topology import broken_solid, solid_fault
 from ..settings import Settings
 
 if TYPE_CHECKING:
@@ -58,10 +58,11 @@ def check_result(result: MorphResult) -> None:
 
 
 def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
-    """Refuse a hot part the kernel finds invalid as given, naming the solid, the face, its surface type, a point
-    on it and what BRepCheck says, or one that is no closed solid (:class:`InputError`).  ``hot_checks`` holds
-    one :class:`SolidCheck` per solid of the converted part (:func:`~hot2cold.kernel.topology.decompose`
-    refuses a conversion that breaks a valid solid)."""
+    """Refuse a hot part that is no closed solid, or that the kernel finds invalid as given, naming the solid,
+    the face, its surface type, a point on it and what BRepCheck says (:class:`InputError`); and one valid as
+    given that the B-spline conversion broke, naming the face likewise (:class:`KernelError`).  ``hot_checks``
+    holds one :class:`SolidCheck` per solid of the converted part (``part.kernel.hot``): its BRepCheck is the
+    one run on the converted part."""
     for s, check in enumerate(hot_checks):
         if check.free_edges:
             raise InputError(
@@ -70,9 +71,9 @@ def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
     broken = broken_solid(part.kernel.source)
     if broken:
         raise InputError(f"{broken}; repair the part in CAD")
-    for s, check in enumerate(hot_checks):
+    for s, check in enumerate(hot_checks):      # valid as given, invalid as converted: the conversion broke it
         if not check.valid:
-            raise InputError(f"hot solid {s} is not valid after B-spline conversion (BRepCheck)")
+            raise KernelError(f"B-spline conversion made solid {s} invalid: {solid_fault(part.kernel.hot, s)}")
 
 
 #: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user.
