@@ -362,10 +362,9 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
                 f"({scale.largest:.4g} mm; up to {_MOVE_MARGIN:g} x that + {scale.reach:.3g} mm accepted)")
         if len(over):
             k = over[0]
-            moved = np.linalg.norm(cold - hot, axis=1).max()
             problems.setdefault(face.solid, []).append(
                 f"folds: face {face.index} turns over at {len(over)} of {len(uv)} points, e.g. near "
-                f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, the field moving it by up to {moved:.3g} mm "
+                f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, the field moving it by up to {moves.max():.3g} mm "
                 f"(the part is {part.diagonal:.4g} mm across)")
     log.info("the cold part moves face %d farthest, by %.4g mm (%.4g mm accepted: the field's largest "
              "displacement %.4g mm)", farthest[1], farthest[0], scale.move_bound, scale.largest)

@@ -16,6 +16,7 @@ faces, distances and parameters to 1e-9 as every node projected onto every face 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -156,13 +157,14 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     spacing = part.diagonal / 150.0
     cloud, cloud_face = _face_cloud(part, projector, spacing)
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * spacing)
+    boundary = _Boundary.of(part)
     group_of_face = np.array([face.solid for face in part.faces], int)
     groups = np.unique(group_of_face)
     records = []
     for g in groups:
         keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
         records.append(_classify_group(part, points, pair_node[keep], pair_face[keep], node_distance,
-                                       edge_distance, spacing, projector))
+                                       edge_distance, spacing, projector, boundary))
     if len(records) == 1:
         role, owner, uv, t, foot, distance = records[0]
         node = np.arange(n)
@@ -188,7 +190,8 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
 
 
 def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
-                    node_distance: float, edge_distance: float, spacing: float, projector: Projector):
+                    node_distance: float, edge_distance: float, spacing: float, projector: Projector,
+                    boundary: _Boundary):
     """Classify ``points (N, 3)`` on the faces of the candidate pairs ``(pair_node, pair_face)`` (each
     ``(c,)``, sorted by face): the arrays role, owner ``(N,)``, uv ``(N, 2)``, t ``(N,)``, foot ``(N, 3)``,
     distance ``(N,)`` of :class:`Classification`."""
@@ -237,35 +240,60 @@ def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_
         foot[idx] = evaluate_surface(part.faces[k].surface, uv[idx, 0], uv[idx, 1])
         distance[idx] = best[idx]
 
-    _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector)
+    _claim_vertices_and_edges(part, boundary, points, role, owner, uv, t, foot, distance, edge_distance, projector)
     return role, owner, uv, t, foot, distance
 
 
-def _claim_vertices_and_edges(part, points, role, owner, uv, t, foot, distance, edge_distance, projector):
+@dataclass(frozen=True, eq=False)
+class _Boundary:
+    """The part's vertices and edges as k-d trees, built once for every group of faces (solid) that claims
+    nodes for them.
+
+    Attributes
+    ----------
+    vertices : cKDTree over the part's vertices ``(nv, 3)``, or None when it has none.
+    samples : cKDTree over points along every non-degenerate edge, ``h`` apart, or None when it has none.
+    sample_edge : ``(m,)`` int, the edge of each sample.
+    h : float, the sample spacing (mm): a node within d of an edge curve is within d + h of its samples.
+    """
+
+    vertices: cKDTree | None
+    samples: cKDTree | None
+    sample_edge: np.ndarray
+    h: float
+
+    @classmethod
+    def of(cls, part: Part) -> _Boundary:
+        vertices = cKDTree(part.vertices) if len(part.vertices) else None
+        samples, sample_edge, h = [], [], part.diagonal / 400.0
+        for edge in part.edges:
+            if edge.degenerate:
+                continue
+            s = np.linspace(*edge.curve.domain, max(2, int(np.ceil(curve_length(edge.curve) / h)) + 1))
+            samples.append(evaluate_curve(edge.curve, s))
+            sample_edge.append(np.full(len(s), edge.index))
+        if not samples:
+            return cls(vertices, None, np.zeros(0, int), h)
+        return cls(vertices, cKDTree(np.concatenate(samples)), np.concatenate(sample_edge), h)
+
+
+def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv, t, foot, distance, edge_distance,
+                              projector):
     """Re-assign face nodes that lie on a vertex or an edge of their face (in place)."""
     used = np.flatnonzero(role == Role.FACE)
     if len(used) == 0:
         return
-    if len(part.vertices):
-        d_v, v_idx = cKDTree(part.vertices).query(points[used])
+    if boundary.vertices is not None:
+        d_v, v_idx = boundary.vertices.query(points[used])
         at_vertex = d_v <= edge_distance
         idx = used[at_vertex]
         role[idx], owner[idx] = Role.VERTEX, v_idx[at_vertex]
         foot[idx], distance[idx] = part.vertices[v_idx[at_vertex]], d_v[at_vertex]
         uv[idx] = np.nan
         used = used[~at_vertex]
-    edge_ids = [e.index for e in part.edges if not e.degenerate]
-    if not edge_ids or len(used) == 0:
+    if boundary.samples is None or len(used) == 0:
         return
-    # Edge points at spacing h: a node within edge_distance of a curve is within edge_distance + h of them.
-    samples, sample_edge, h = [], [], part.diagonal / 400.0
-    for e in edge_ids:
-        curve = part.edges[e].curve
-        s = np.linspace(*curve.domain, max(2, int(np.ceil(curve_length(curve) / h)) + 1))
-        samples.append(evaluate_curve(curve, s))
-        sample_edge.append(np.full(len(s), e))
-    samples, sample_edge = np.concatenate(samples), np.concatenate(sample_edge)
-    tree = cKDTree(samples)
+    tree, sample_edge, h = boundary.samples, boundary.sample_edge, boundary.h
     near, _ = tree.query(points[used], workers=-1)
     close = used[near <= edge_distance + h]
     pair_node, pair_edge = _candidates(tree, sample_edge, points[close], edge_distance, h)
