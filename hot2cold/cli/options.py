@@ -59,25 +59,26 @@ def to_flag(value, folder: Path) -> bool:
     raise ValueError(f"must be true or false, got {value!r}")
 
 
-def to_number(value, folder: Path) -> float:
+def _float(value, must: str) -> float:
+    """``value`` as a float (not a bool); ``ValueError("must be <must>, got ...")`` otherwise."""
     try:
         if isinstance(value, bool):
             raise ValueError
         return float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"must be a number (mm), got {value!r}") from None
+        raise ValueError(f"must be {must}, got {value!r}") from None
+
+
+def to_number(value, folder: Path) -> float:
+    return _float(value, "a number (mm)")
 
 
 def to_share(value, folder: Path) -> float:
     """A positive number, a share (of the part's diagonal)."""
-    try:
-        if isinstance(value, bool):
-            raise ValueError
-        share = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"must be a positive number (a share of the part's diagonal), got {value!r}") from None
+    must = "a positive number (a share of the part's diagonal)"
+    share = _float(value, must)
     if not share > 0:
-        raise ValueError(f"must be a positive number (a share of the part's diagonal), got {value!r}")
+        raise ValueError(f"must be {must}, got {value!r}")
     return share
 
 
