@@ -70,6 +70,31 @@ def test_rank_deficient_gives_minimum_norm_solution_and_rank():
     assert sol.sigma_min < sol.cutoff
 
 
+def test_a_prior_fills_the_dropped_directions_and_changes_nothing_else():
+    rng = np.random.default_rng(4)
+    base = rng.normal(size=(60, 5))
+    a = np.c_[base, base[:, 0], np.zeros(60)]          # rank 5 of 7: a repeated and an empty column
+    truth = rng.normal(size=(7, 3))
+    b = a @ truth
+    plain = solve_tsvd(a, b)
+    assert plain.rank == 5
+    assert np.abs(plain.x - truth).max() > 0.1          # minimum norm: not the truth where it is undetermined
+    with_truth = solve_tsvd(a, b, prior=truth)           # data and prior agree: exactly the prior
+    np.testing.assert_allclose(with_truth.x, truth, rtol=0, atol=1e-12)
+    assert with_truth.rank == plain.rank
+    prior = rng.normal(size=(7, 3))
+    guided = solve_tsvd(a, b, prior=prior)
+    np.testing.assert_allclose(a @ guided.x, b, rtol=0, atol=1e-10)       # still a least-squares solution
+    np.testing.assert_allclose(guided.x[6], prior[6], rtol=0, atol=1e-12)  # the empty column keeps the prior
+    # the repeated pair keeps the prior's difference, its sum is the data's
+    np.testing.assert_allclose(guided.x[0] - guided.x[5], prior[0] - prior[5], rtol=0, atol=1e-10)
+    full = rng.normal(size=(60, 4))                        # full rank: the prior does not matter
+    np.testing.assert_allclose(solve_tsvd(full, b, prior=rng.normal(size=(4, 3))).x, solve_tsvd(full, b).x,
+                               rtol=0, atol=1e-10)
+    with pytest.raises(ValueError, match=r"prior must be \(7, 3\)"):
+        solve_tsvd(a, b, prior=np.zeros((7,)))
+
+
 def test_ill_conditioned_columns_are_truncated():
     rng = np.random.default_rng(4)
     s = 80

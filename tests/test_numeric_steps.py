@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hot2cold.pipeline.artificial import FieldEstimator
+from hot2cold.pipeline.artificial import FieldEstimator, carry_to_feet
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_curve
 from hot2cold.pipeline.edge_fit import morph_edge
 from hot2cold.pipeline.face_fit import _artificial_parameters
@@ -55,6 +55,22 @@ def test_field_estimator_is_exact_for_affine_fields_and_extrapolates():
     est = FieldEstimator(pts, pts @ A.T + B - pts, neighbours=12)
     far = np.array([[15.0, -3.0, 12.0], [5.0, 5.0, 5.0]])
     assert np.abs(est(far) - (far @ A.T + B - far)).max() <= 1e-10
+
+
+def test_displacements_carried_to_the_feet_are_exact_for_an_affine_field():
+    feet = RNG.uniform(0, 10, (400, 3))
+    offset = RNG.normal(0, 0.05, (400, 3))
+    nodes = feet + offset                                   # nodes beside their faces and edges
+    disp = nodes @ A.T + B - nodes
+    used = np.ones(400, bool)
+    used[:5] = False                                        # nodes that take no part keep their value
+    carried = carry_to_feet(nodes, feet, disp, used, 20, 1e-12)
+    exact = feet @ A.T + B - feet
+    assert np.abs(disp[used] - exact[used]).max() > 1e-3    # what the fits would have put at the feet
+    assert np.abs(carried[used] - exact[used]).max() <= 1e-10
+    np.testing.assert_array_equal(carried[~used], disp[~used])
+    on = carry_to_feet(feet, feet, feet @ A.T + B - feet, used, 20, 1e-12)   # nodes on their feet: untouched
+    np.testing.assert_array_equal(on, feet @ A.T + B - feet)
 
 
 def test_field_estimator_handles_coplanar_points():

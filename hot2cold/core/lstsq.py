@@ -18,6 +18,7 @@ reduced block by block to the triangular factor of a QR decomposition (:func:`so
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -181,7 +182,7 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
     return rc
 
 
-def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, block_rows: int | None = None,
+def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
 
@@ -194,6 +195,10 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, block_rows: int | None = N
     B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation.
     epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * s * epsilon``; default the
         paper's FLT_EPSILON (single precision, about 1.2e-7).
+    prior : (n, k) or (n,) array or None, a guess of ``x`` that the dropped directions keep: the solution is
+        ``prior + x_c`` with ``x_c`` the truncated minimum-norm solution of ``A x_c = B - A prior``.  Where
+        nothing is dropped the prior changes nothing (up to rounding); where directions are dropped they take
+        the prior's value instead of zero.  None: zero, the paper's minimum-norm solution.
     block_rows : int > 0 or None, rows of ``A`` reduced at a time; None: ``ROWS_PER_COLUMN`` times the
         columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
         ``block_bytes``.  It changes the rounding, not the result.
@@ -235,6 +240,14 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, block_rows: int | None = N
         raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
     if not np.all(np.isfinite(b)):
         raise ValueError(f"B {b.shape} holds NaN or inf")
+    if prior is not None:
+        x0 = np.asarray(prior, dtype=float)
+        if x0.shape != (n,) + b.shape[1:]:
+            raise ValueError(f"A is {A.shape} and B {b.shape}, so prior must be {(n,) + b.shape[1:]}, got {x0.shape}")
+        if not np.all(np.isfinite(x0)):
+            raise ValueError(f"prior {x0.shape} holds NaN or inf")
+        sol = solve_tsvd(A, b - A @ x0, epsilon, block_rows=block_rows, block_bytes=block_bytes)
+        return dataclasses.replace(sol, x=sol.x + x0)
 
     vector = b.ndim == 1
     b2 = b.reshape(s, 1) if vector else b

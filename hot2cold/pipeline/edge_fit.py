@@ -17,7 +17,7 @@ from .artificial import FieldEstimator
 from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
-from ..core.model import Classification, Part, Role
+from ..core.model import Classification, Edge, Part, Role
 from ..settings import Settings
 
 log = logging.getLogger(__name__)
@@ -57,6 +57,20 @@ def vertex_displacements(part: Part, cls: Classification, field: DisplacementFie
         if len(nodes):
             disp[v] = field.displacements[nodes].mean(axis=0)
     return disp
+
+
+def end_displacements(part: Part, edge: Edge, vertex_disp: np.ndarray, estimator: FieldEstimator) -> np.ndarray:
+    """The displacements ``(2, 3)`` of the end poles of ``edge``'s curve: its vertices' (eq. 10), carried from
+    the vertex to the curve's end by the field's change over the gap between them (a vertex may sit up to its
+    tolerance off the ends of its edges; :func:`hot2cold.pipeline.artificial.carry_to_feet`)."""
+    ends = vertex_disp[list(edge.vertices)]
+    curve_ends = edge.curve.poles[[0, -1]]
+    at = part.vertices[list(edge.vertices)]
+    gap = np.linalg.norm(curve_ends - at, axis=1) > 1e-12 * part.diagonal
+    if gap.any():
+        ends = ends.copy()
+        ends[gap] += estimator(curve_ends[gap]) - estimator(at[gap])
+    return ends
 
 
 def _sparse_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
@@ -104,7 +118,8 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     if n > 2 and len(t):
         basis = weight[:, None] * curve_basis(curve, t).toarray()
         rhs = weight[:, None] * disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
-        sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon)         # eq. (13)-(20)
+        prior = None if estimator is None else estimator(curve.poles[1:-1])
+        sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon, prior=prior)         # eq. (13)-(20)
         delta[1:-1] = sol.x
         rank, condition = sol.rank, sol.condition
     elif n > 2:
@@ -125,7 +140,7 @@ def morph_edges(part: Part, cls: Classification, field: DisplacementField, verte
             continue
         nodes = cls.nodes_of(Role.EDGE, edge.index)
         out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
-                              vertex_disp[list(edge.vertices)], estimator, settings.svd_epsilon,
+                              end_displacements(part, edge, vertex_disp, estimator), estimator, settings.svd_epsilon,
                               edge.index, settings.artificial_weight))
     log.info("morphed %d edges", len(out))
     return out

@@ -182,12 +182,20 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
             tied.append(side)
             continue
         # The surface at the edge's pcurve moves as the edge does.  (Not onto the cold edge: a trimmed face
-        # of a boolean may sit up to its edge tolerance off its edge, and that hot gap is kept, not closed.)
+        # of a boolean may sit up to its edge tolerance off its edge, and that hot gap is kept, not closed;
+        # the edge's displacement is carried across the gap by the field's change over it, as a node's is to
+        # its foot point, so that an affine field moves the face exactly.)
         edge = part.edges[use.edge]
         if edge.degenerate:
-            moved = np.broadcast_to(vertex_disp[edge.vertices[0]], (len(use.t), 3))
+            on_edge = np.broadcast_to(part.vertices[edge.vertices[0]], (len(use.t), 3))
+            moved = np.broadcast_to(vertex_disp[edge.vertices[0]], (len(use.t), 3)).copy()
         else:
-            moved = evaluate_curve(edge_morphs[use.edge].curve, use.t) - evaluate_curve(edge.curve, use.t)
+            on_edge = evaluate_curve(edge.curve, use.t)
+            moved = evaluate_curve(edge_morphs[use.edge].curve, use.t) - on_edge
+        on_face = evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1])
+        gap = np.linalg.norm(on_face - on_edge, axis=1) > tol * 1e-5
+        if gap.any():
+            moved[gap] += estimator(on_face[gap]) - estimator(on_edge[gap])
         uv_rows.append(use.uv)
         target_rows.append(moved)
     edge_rows = sum(len(r) for r in uv_rows)
@@ -213,7 +221,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         basis.data *= np.repeat(weight, np.diff(basis.indptr))                      # rows weighted in place
         flat = delta.reshape(-1, 3)
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
-        sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon)                  # eq. (19)-(20)
+        prior = estimator(surface.poles.reshape(-1, 3)[free])
+        sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon, prior=prior)     # eq. (19)-(20)
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
     return FaceMorph(face.index, surface.with_poles(surface.poles + delta), len(nodes), edge_rows,

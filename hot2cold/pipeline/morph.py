@@ -25,10 +25,10 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .artificial import FieldEstimator
+from .artificial import FieldEstimator, carry_to_feet
 from .checks import FieldScale, check_cold, check_coverage, check_hot, check_result
 from .classify import classify_nodes
-from .edge_fit import EdgeMorph, morph_edge, morph_edges, vertex_displacements
+from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
 from .g1 import (CornerReport, G1Report, TangentEdge, correct_corners, correct_g1, edge_decided, kink_added,
@@ -202,8 +202,8 @@ class MorphContext:
         for e in refined:
             edge, nodes = part.edges[e], cls.nodes_of(Role.EDGE, e)
             edge_morphs[e] = morph_edge(edge.curve, cls.t[nodes], self.field.displacements[nodes],
-                                        self.vertex_displacements[list(edge.vertices)], self.estimator,
-                                        settings.svd_epsilon, e, settings.artificial_weight)
+                                        end_displacements(part, edge, self.vertex_displacements, self.estimator),
+                                        self.estimator, settings.svd_epsilon, e, settings.artificial_weight)
         if self.tangent:
             curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent, _KINK_NOISE_DEG,
                                         decided=edge_decided(part))
@@ -322,6 +322,9 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
         field = field.take(cls.node)
     check_coverage(part, cls, field, settings)
+    field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
+                                                          settings.vertex_neighbours, 1e-12 * part.diagonal),
+                              field.node_ids, field.source)
     scale = FieldScale.of(cls, field)
     stages.lap("classify")
     stages.progress("classify")
