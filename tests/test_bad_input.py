@@ -605,3 +605,71 @@ def test_ctrl_c_in_a_running_morph(tmp_path, box):
     assert proc.returncode == 130
     assert err.splitlines()[-1] == "hot2cold: interrupted; nothing written" and "Traceback" not in err
     assert _left(tmp_path) == []
+
+
+def _bending(nodes: np.ndarray, c: float = 0.004) -> np.ndarray:
+    """A field that bends the box along x: ``dz = c x^2`` (0.1 mm at its sides x = ±5 mm for c = 0.004)."""
+    return np.column_stack([0 * nodes[:, 0], 0 * nodes[:, 0], c * nodes[:, 0] ** 2])
+
+
+def test_a_field_the_faces_cannot_follow_is_reported_between_the_nodes(tmp_path, box, out, capsys):
+    """The box's faces are bilinear patches between straight edges: under a field that bends them they stay
+    flat, the top and bottom faces 0.1 mm (the whole displacement) off it in their middle, between the nodes.
+    The report says so per face; the part is written (it is inaccurate, not wrong)."""
+    field = _write_field(tmp_path / "bend.csv", box[1], _bending(box[1]))
+    report = tmp_path / "report.json"
+    assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
+    data = json.loads(report.read_text())
+    between = sorted(f["delta_between"] for f in data["faces"])
+    assert between[-1] == pytest.approx(0.1, abs=2e-3)
+    assert data["delta_between"] == between[-1]
+    assert data["max_displacement"] == pytest.approx(0.1, abs=1e-3)
+
+
+def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, capsys, monkeypatch):
+    """A face more than twice the field's largest displacement from the field's local estimate somewhere on
+    it is refused.  An honest morph of the box does not get there (the check guards against a fit gone
+    wrong), so the bound is cut to a tenth of the displacement, which the bent box's flat faces miss."""
+    from hot2cold.pipeline import checks
+    monkeypatch.setattr(checks, "_BETWEEN_MARGIN", 0.1)
+    field = _write_field(tmp_path / "bend.csv", box[1], _bending(box[1]))
+    _refused(capsys, _morph(box[0], field, out), 4,
+             r"cold solid 0 leaves the field between the nodes: face \d is 0\.\d+ mm from where the field's local "
+             r"estimate puts it near \(.*\) mm, more than 0\.1 x the field's largest displacement \(0\.1 mm\)", out)
+
+
+def test_check_cold_finds_a_bump_between_the_nodes(box):
+    """A fit gone wrong where the report's nodes do not look: a 1 mm bump in the middle of the top face of a
+    box morphed exactly.  The check over a grid of every face finds it (and only there)."""
+    from dataclasses import replace
+
+    from hot2cold import morph
+    from hot2cold.core.bspline import insert_knots
+    from hot2cold.kernel.project import Projector
+    from hot2cold.kernel.validity import check_solids
+    from hot2cold.pipeline.artificial import FieldEstimator
+    from hot2cold.pipeline.checks import FieldScale, check_cold
+
+    nodes = box[1]
+    result = morph(str(box[0]), (nodes, FIELD(nodes)))
+    part, cls = result.part, result.classification
+    used = cls.used
+    estimator = FieldEstimator(cls.foot[used], result.field.displacements[used])
+    args = (Projector(part.kernel.faces, part.kernel.edges), check_solids(part.kernel.hot),
+            check_solids(result.cold_kernel.shape), FieldScale.of(cls, result.field), estimator)
+    fine = check_cold(part, result.cold_kernel, result.faces, *args)
+    assert fine.problems == {}
+    assert np.nanmax(fine.between) < 1e-9
+    top = max(range(len(part.faces)), key=lambda k: part.faces[k].surface.poles[..., 2].min())
+    surface = result.faces[top].surface
+    for axis in (0, 1):
+        lo, hi = (surface.u_knots if axis == 0 else surface.v_knots)[[0, -1]]
+        surface = insert_knots(surface, axis, [(lo + hi) / 2])
+    poles = surface.poles.copy()
+    poles[1, 1, 2] += 1.0
+    faces = list(result.faces)
+    faces[top] = replace(faces[top], surface=surface.with_poles(poles))
+    bumped = check_cold(part, result.cold_kernel, faces, *args)
+    assert 0.9 < bumped.between[top] <= 1.0       # the distance to a tent 1 mm high over 5 mm: 0.98 at its top
+    assert np.nanmax(np.delete(bumped.between, top)) < 1e-9
+    assert any(p.startswith(f"leaves the field between the nodes: face {top} is 0.9") for p in bumped.problems[0])

@@ -6,8 +6,8 @@
 * :func:`check_coverage` also refuses a field whose displacements are of the part's size
   (``Settings.max_displacement_rel``);
 * :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself, no face moved
-  farther than the field moves its nodes, no volume changed beyond what the field's strain allows
-  (:class:`FieldScale`);
+  farther than the field moves its nodes or away from the field between them, no volume changed beyond what
+  the field's strain allows (:class:`FieldScale`);
 * :func:`check_result`: refuses a result that failed any of them or that the kernel finds invalid or open
   (:class:`MorphError`); :func:`~hot2cold.pipeline.morph.morph` calls it (unless ``check=False``) and so does
   :meth:`~hot2cold.pipeline.morph.MorphResult.write_step` before it writes.
@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.bspline import NORMAL_RTOL, evaluate_surface, surface_basis, surface_derivative_bases
+from ..core.footpoint import project_to_surface
 from ..errors import FieldError, InputError, KernelError, MorphError
 from .classify import curve_length
 from .face_fit import FaceMorph
@@ -243,6 +244,14 @@ _VOLUME_MARGIN = 3.0
 #: ... plus this share of the hot volume (the fit, and the kernel's volume integration, for a field that
 #: hardly strains the part: a rigid motion).
 _VOLUME_FLOOR = 1e-3
+#: Between the nodes a cold face may be up to ``_BETWEEN_MARGIN`` times the field's largest displacement from
+#: the field's local estimate, plus ``_BETWEEN_FLOOR`` times the node distance (:attr:`FieldScale.between_bound`).
+#: A face that misses the field between its nodes by a share of the displacement is inaccurate, and the report
+#: says by how much: a plane kept bilinear misses a bending field by up to 40 % on real parts, and a box's
+#: face bent by a field quadratic along it (its edges straight lines between the moved corners) by the whole
+#: displacement.  A fit of displacements no larger than the field's does not go twice as far; a face that
+#: does follows no field (``--extrapolate`` once wrote parts 0.9 to 60 mm off with exit 0).
+_BETWEEN_MARGIN, _BETWEEN_FLOOR = 2.0, 1e-3
 #: Nearest neighbours of each node whose displacements estimate the field's strain.
 _STRAIN_NEIGHBOURS = 8
 
@@ -288,6 +297,12 @@ class FieldScale:
         return _MOVE_MARGIN * self.largest + self.reach
 
     @property
+    def between_bound(self) -> float:
+        """The farthest (mm) a cold face may be from the field's local estimate between the nodes:
+        ``_BETWEEN_MARGIN`` x largest, plus ``_BETWEEN_FLOOR`` x reach for a field that hardly moves the part."""
+        return _BETWEEN_MARGIN * self.largest + _BETWEEN_FLOOR * self.reach
+
+    @property
     def volume_bound(self) -> float:
         """The largest ``|V_cold / V_hot - 1|`` accepted: ``_VOLUME_MARGIN ((1 + strain)^3 - 1) +
         _VOLUME_FLOOR``."""
@@ -311,15 +326,36 @@ def _listed(names: list[str]) -> str:
 _CHECK_SPACING, _CHECK_MOST = 1 / 150, 200
 
 
+@dataclass(frozen=True, eq=False)
+class ColdCheck:
+    """What :func:`check_cold` found.
+
+    Attributes
+    ----------
+    problems : dict, per solid index the list of what is wrong with it (one sentence each); empty if nothing.
+    between : (n_faces,) float array, per face the largest distance (mm) of the cold face from where the
+        field's local estimate puts the points of a grid over its trimmed domain (``hot + estimate(hot)``
+        projected onto the cold face): the error between the nodes, as far as the nodes tell (NaN for a face
+        without grid points).
+    """
+
+    problems: dict[int, list[str]]
+    between: np.ndarray
+
+
 def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,
-               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale
-               ) -> dict[int, list[str]]:
+               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale,
+               estimator: Callable[[np.ndarray], np.ndarray]) -> ColdCheck:
     """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
     solid: turned inside out (its volume changed sign), its volume changed by more than the field's strain
     allows (``scale.volume_bound``), a face folded over (somewhere on a grid over its trimmed domain the
     normal ``S_u x S_v`` of the cold surface points against the hot one's), a face moved farther than the
-    field moves any node (a point of that grid farther than ``scale.move_bound`` from its hot position), or
-    crossing itself.  ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid.
+    field moves any node (a point of that grid farther than ``scale.move_bound`` from its hot position), a
+    face away from the field between the nodes (a point of that grid farther from the cold face than
+    ``scale.between_bound`` after the field's local estimate
+    ``estimator(points (m, 3)) -> (m, 3)`` moved it: the nodes say where the part goes, and a face that
+    wanders off between them is wrong however close it passes the nodes), or crossing itself.
+    ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid.
 
     The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
     1 to 3 s on the bundled real parts, so it is run only where a gap of the part may have closed: two
@@ -346,11 +382,20 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     spacing = _CHECK_SPACING * part.diagonal
     hot_points, cold_points = [], []
     farthest = (0.0, -1)
+    between = np.full(len(part.faces), np.nan)
     for face, fm in zip(part.faces, face_morphs):
         uv = _check_grid(face, spacing, projector)
         (hot, hot_n), (cold, cold_n) = _points_and_normals(face.surface, fm.surface, uv)
         hot_points.append(hot)
         cold_points.append(cold)
+        if len(uv):
+            off, k = _between(fm, hot, cold, uv, estimator, projector.face_box(face.index))
+            between[face.index] = off[k]
+            if off[k] > scale.between_bound:
+                problems.setdefault(face.solid, []).append(
+                    f"leaves the field between the nodes: face {face.index} is {off[k]:.4g} mm from where the "
+                    f"field's local estimate puts it near ({', '.join(f'{x:.4g}' for x in hot[k])}) mm, more "
+                    f"than {_BETWEEN_MARGIN:g} x the field's largest displacement ({scale.largest:.4g} mm)")
         over = np.flatnonzero(np.einsum("ij,ij->i", hot_n, cold_n) < 0)    # NaN (no normal) compares False
         moves = np.linalg.norm(cold - hot, axis=1)
         farthest = max(farthest, (float(moves.max()) if len(moves) else 0.0, face.index))
@@ -378,10 +423,26 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
             log.info("%d pairs of points came closer than half their hot distance: checking the cold part for "
                      "self-intersection", closing)
             _check_crossing(part, cold_kernel, problems)
+    if np.isfinite(between).any():
+        k = int(np.nanargmax(between))
+        log.info("between the nodes the cold part is at most %.3g mm (face %d) from the field's local estimate",
+                 between[k], k)
     for s in sorted(problems):
         for text in problems[s]:
             log.warning("cold solid %d %s", s, text)
-    return problems
+    return ColdCheck(problems, between)
+
+
+def _between(fm: FaceMorph, hot: np.ndarray, cold: np.ndarray, uv: np.ndarray,
+             estimator: Callable[[np.ndarray], np.ndarray], box: np.ndarray) -> tuple[np.ndarray, int]:
+    """Distances ``(m,)`` (mm) of the estimated cold positions ``hot + estimator(hot)`` of the grid points
+    ``hot (m, 3)`` (at ``uv (m, 2)``, on the cold face at ``cold (m, 3)``) to the cold face, and the index of the
+    largest.  Foot points by Newton's method from ``uv`` within ``box``; where that does not settle, the
+    distance to the cold point at the same parameters (an upper bound)."""
+    expected = hot + estimator(hot)
+    fp = project_to_surface(fm.surface, expected, uv, box)
+    off = np.where(fp.settled, fp.distance, np.linalg.norm(expected - cold, axis=1))
+    return off, int(np.argmax(off))
 
 
 def _check_grid(face, spacing: float, projector: Projector) -> np.ndarray:

@@ -366,7 +366,8 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     gaps = fit_tolerances(cold)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
-    problems = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale)
+    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, context.estimator)
+    problems = cold_check.problems
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
     stages.progress("sew")
@@ -375,7 +376,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
                          [f.surface for f in face_morphs])
     stages.lap("report")
-    report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps), errors,
+    report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion))
     stages.progress("report")

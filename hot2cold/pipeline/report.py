@@ -27,7 +27,11 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class FaceReport:
-    """One face: FE nodes, control net, errors (mm), and how the fit went."""
+    """One face: FE nodes, control net, errors (mm), and how the fit went.
+
+    ``delta_max`` and ``delta_mean`` are the errors at the face's nodes (eq. 21-22); ``delta_between`` is the
+    largest distance of the cold face from the field's local estimate on a grid over its trimmed domain, the
+    error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`)."""
 
     index: int
     solid: int
@@ -41,6 +45,7 @@ class FaceReport:
     tied_sides: list[str]
     edge_rows: int
     artificial_nodes: int
+    delta_between: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -92,6 +97,7 @@ class Report:
     delta_max: float
     delta_mean: float
     vertex_delta_max: float
+    delta_between: float
     valid: bool
     free_edges: int
     faces: list[FaceReport]
@@ -185,6 +191,10 @@ class Report:
                          f"residual {self.inversion['residual']:.2e} mm")
         lines.append(f"overall: Δmax {_num(self.delta_max)} mm, Δmean {_num(self.delta_mean)} mm, "
                      f"largest displacement {self.max_displacement:.4g} mm")
+        if not math.isnan(self.delta_between):
+            worst = max((f for f in self.faces if not math.isnan(f.delta_between)), key=lambda f: f.delta_between)
+            lines.append(f"between the nodes: Δmax {_num(self.delta_between)} mm (face {worst.index}), against the "
+                         f"field's local estimate on a grid over every face")
         return "\n".join(lines)
 
 
@@ -246,12 +256,14 @@ class Fits:
 @dataclass(frozen=True, eq=False)
 class Checks:
     """The kernel's checks of a morph: one :class:`SolidCheck` per solid of the hot part and of the cold one
-    (the cold ones marked invalid where :func:`~.checks.check_cold` found a problem), and ``gaps (n_edges,)``,
-    each edge's largest distance (mm) to the faces it bounds in the cold part."""
+    (the cold ones marked invalid where :func:`~.checks.check_cold` found a problem), ``gaps (n_edges,)``,
+    each edge's largest distance (mm) to the faces it bounds in the cold part, and ``between (n_faces,)``, each
+    face's largest distance (mm) from the field's local estimate between the nodes (None: not checked)."""
 
     hot: list[SolidCheck]
     cold: list[SolidCheck]
     gaps: np.ndarray
+    between: np.ndarray | None = None
 
 
 def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
@@ -267,9 +279,10 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
     for fm in fits.faces:
         d = errors[cls.nodes_of(Role.FACE, fm.index)]
         nu, nv = fm.surface.shape
+        between = float("nan") if checks.between is None else float(checks.between[fm.index])
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
-                                fm.artificial))
+                                fm.artificial, between))
     edges = []
     for em in fits.edges:
         d = errors[cls.nodes_of(Role.EDGE, em.index)]
@@ -293,6 +306,7 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
         max_displacement=float(np.linalg.norm(field.displacements[used], axis=1).max()) if used.any() else 0.0,
         delta_max=_stats(all_err)[0], delta_mean=_stats(all_err)[1],
         vertex_delta_max=_stats(vertex_err)[0],
+        delta_between=max((f.delta_between for f in faces if not math.isnan(f.delta_between)), default=float("nan")),
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
         faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
         tolerance=context.settings.tolerance, refinements=[asdict(r) for r in fits.refinements],
