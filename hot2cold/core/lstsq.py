@@ -10,7 +10,9 @@ needs full rank):
 
 The paper writes ``(s - 1)`` for its ``s - 1`` rows; here ``s`` is simply the number of rows of ``A``.  The
 result is the minimum-norm least-squares solution of the problem with the small singular values removed:
-undetermined combinations of unknowns are set to zero instead of blowing up.
+undetermined combinations of unknowns are set to zero instead of blowing up.  Given a ``prior`` (a guess of
+``x``), they keep the prior's value instead: the morph passes the field's local estimate at the poles, so that
+a pole the nodes do not determine moves with the field around it rather than staying put.
 
 A face may receive several hundred thousand FE nodes, so a tall ``A`` is never held densely: its rows are
 reduced block by block to the triangular factor of a QR decomposition (:func:`solve_tsvd`), and only that

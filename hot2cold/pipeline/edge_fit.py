@@ -5,6 +5,10 @@ curve are its vertices, and they move with the vertex displacements (eq. 10); th
 least-squares problem of eq. (11)-(18) by truncated SVD (eq. 19-20):
 
     sum_{i=1..n-1} N_i(u_k) dp_i = dd_k - N_0(u_k) dp_0 - N_n(u_k) dp_n,   k over the edge's nodes.
+
+Where the cut-off drops combinations of inner poles, they keep the field's local estimate at the poles (the
+solver's ``prior``) rather than zero.  A vertex may sit up to its tolerance off the ends of its edges: the end
+poles take the vertex displacement carried across that gap (:func:`end_displacements`).
 """
 from __future__ import annotations
 

@@ -9,7 +9,9 @@ remaining poles solve eq. (38),
 
     sum_{i,j free} N_i(u_k) N_j(v_k) dp_ij = dd_k - sum_{i,j fixed} N_i(u_k) N_j(v_k) dp_ij,
 
-over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20).
+over the face's own nodes (not those already used by its edges, eq. 37), by truncated SVD (eq. 19-20); the
+combinations of poles the SVD drops keep the field's local estimate at the poles (the solver's ``prior``)
+rather than zero, so that an affine field moves every pole exactly even where the cut-off drops some.
 Edges that are not a whole side (trimmed faces, split sides) add rows that hold the surface to the morphed
 edge at points along the edge's curve on the face, and knot-span patches with too few data get artificial
 nodes (eq. 39) so that no pole is left undetermined.  Artificial rows carry the weight
