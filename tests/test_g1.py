@@ -371,3 +371,24 @@ def test_trimmed_faces_on_a_side_share_their_row_and_close_the_kink():
     assert rep.kink_after_max <= 0.01
     assert np.array_equal(surfaces[0].poles[-1], surfaces[1].poles[0])             # one row again
     assert np.allclose(surfaces[0].poles[-1], 0.5 * (sa.poles[-1] + drift[0]), rtol=0, atol=1e-15)
+
+
+def test_two_nearly_parallel_corner_planes_on_one_pole_are_one_condition():
+    """An edge of three poles constrained at both ends: its middle pole is the pole next to both vertices.
+    Planes 1e-5 deg apart that disagree by 1e-6 mm ask for a move of about 1e-6 / 1e-7 = 10 mm if both are
+    met; as one condition the pole moves by about the disagreement."""
+    from hot2cold.pipeline.g1 import _least_change
+
+    tilt = np.radians(1e-5)
+    n0, n1 = np.array([0.0, 0.0, 1.0]), np.array([np.sin(tilt), 0.0, np.cos(tilt)])
+    poles_at, delta = _least_change([(1, n0, 1e-6), (1, n1, -1e-6)])
+    assert poles_at == [1]
+    assert np.linalg.norm(delta) <= 2e-6
+    # planes far apart are two conditions, both met exactly
+    n2 = np.array([1.0, 0.0, 0.0])
+    poles_at, delta = _least_change([(1, n0, 1e-3), (1, n2, -2e-3)])
+    np.testing.assert_allclose([delta[0] @ n0, delta[0] @ n2], [1e-3, -2e-3], rtol=0, atol=1e-15)
+    # two poles (a longer edge): each meets its own plane
+    poles_at, delta = _least_change([(1, n0, 1e-3), (3, n1, 2e-3)])
+    assert poles_at == [1, 3]
+    np.testing.assert_allclose([delta[0] @ n0, delta[1] @ n1], [1e-3, 2e-3], rtol=0, atol=1e-15)

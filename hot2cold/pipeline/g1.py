@@ -633,18 +633,7 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
 
     curves = list(curves)
     for e, rows in constraints.items():
-        poles_at = sorted({pole for pole, _, _ in rows})
-        a = np.zeros((len(rows), 3 * len(poles_at)))
-        b = np.array([rhs for _, _, rhs in rows])
-        for r, (pole, n_t, _) in enumerate(rows):
-            j = poles_at.index(pole)
-            a[r, 3 * j:3 * j + 3] = n_t
-        # The least change meeting all rows.  Two rows on one pole (an edge of three poles constrained at both
-        # ends) whose planes are nearly one plane are one condition: their small singular value is dropped
-        # (ratio tan(angle / 2)), or the pole would move by their small disagreement over that angle; on a
-        # SolidWorks part it moved 9 mm for corners of 5e-4 deg.
-        rcond = np.tan(np.radians(_MIN_CORNER_DEG) / 2)
-        delta = np.linalg.lstsq(a, b, rcond=rcond)[0].reshape(-1, 3)
+        poles_at, delta = _least_change(rows)
         poles = curves[e].poles.copy()
         poles[poles_at] += delta
         curves[e] = curves[e].with_poles(poles)
@@ -659,6 +648,24 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
             log.info("G1: vertex %d (faces %s): corner angle %.3g -> %.3g deg", report["vertex"],
                      report["faces"], report["angle_before"], after)
     return curves, reports
+
+
+def _least_change(rows: list[tuple[int, np.ndarray, float]]) -> tuple[list[int], np.ndarray]:
+    """The least moves ``(m, 3)`` of the poles ``poles_at`` (m,) of one edge that meet the rows ``(pole, n_T
+    (3,), rhs)``: ``n_T . delta_pole = rhs`` (a corner plane at each end the pole is next to).
+
+    Two rows on one pole (an edge of three poles constrained at both ends) whose planes are nearly one plane
+    are one condition: their small singular value (ratio ``tan(angle / 2)``) is dropped below
+    ``_MIN_CORNER_DEG``, or the pole would move by their small disagreement over that small angle (on a
+    SolidWorks part, 9 mm for corners of 5e-4 degrees, and the faces folded)."""
+    poles_at = sorted({pole for pole, _, _ in rows})
+    a = np.zeros((len(rows), 3 * len(poles_at)))
+    b = np.array([rhs for _, _, rhs in rows])
+    for r, (pole, n_t, _) in enumerate(rows):
+        j = poles_at.index(pole)
+        a[r, 3 * j:3 * j + 3] = n_t
+    rcond = np.tan(np.radians(_MIN_CORNER_DEG) / 2)
+    return poles_at, np.linalg.lstsq(a, b, rcond=rcond)[0].reshape(-1, 3)
 
 
 def with_corners(part: Part, reports: list[G1Report], corners: list[CornerReport]) -> list[G1Report]:
