@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from hot2cold.pipeline.artificial import FieldEstimator, carry_to_feet
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_curve
@@ -71,6 +72,22 @@ def test_displacements_carried_to_the_feet_are_exact_for_an_affine_field():
     np.testing.assert_array_equal(carried[~used], disp[~used])
     on = carry_to_feet(feet, feet, feet @ A.T + B - feet, used, 20, 1e-12)   # nodes on their feet: untouched
     np.testing.assert_array_equal(on, feet @ A.T + B - feet)
+
+
+def test_field_estimator_reaches_past_a_flat_neighbourhood():
+    """A point beside a plane of foot points (its 20 nearest all on it) and far from the others: the field's
+    change across the plane comes from the foot points that span it, and an affine field is exact there."""
+    plane = np.column_stack([RNG.uniform(0, 10, (400, 2)), np.zeros(400)])
+    far = np.column_stack([RNG.uniform(0, 10, (30, 2)), np.full(30, 40.0)])      # another face, 40 mm up
+    pts = np.concatenate([plane, far])
+    est = FieldEstimator(pts, pts @ A.T + B - pts, neighbours=20)
+    beside = np.array([[5.0, 5.0, 3.0], [2.0, 8.0, -2.0]])
+    assert np.abs(est(beside) - (beside @ A.T + B - beside)).max() <= 1e-10
+    from hot2cold.pipeline.artificial import off_span
+    _, idx = cKDTree(pts).query(beside, k=20)
+    assert off_span(pts[idx], np.ones(idx.shape, bool), beside).all()          # what the wider fit is for
+    on = np.array([[5.0, 5.0, 0.0]])
+    assert not off_span(pts[idx[:1]], np.ones((1, 20), bool), on).any()
 
 
 def test_field_estimator_handles_coplanar_points():
