@@ -121,3 +121,25 @@ def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
     assert sum(line.startswith("| ") for line in board.splitlines()) == 5       # the head and 4 rows
     assert board.endswith("2 of 4 morph (exit 0, valid on read-back, faces kept, 0 free edges); "
                           "affine within 1e-08 mm on 1 of 3")
+
+
+@pytest.mark.slow
+def test_nx_part_with_cone_apexes_on_tessellation_nodes_is_exact(bench, tmp_path):
+    """The NX part's affine morph from triangulation vertices only (no node inside a plane): its cold STEP
+    failed BRepCheck on read-back (exit 4) while artificial nodes beside a planar face's nodes took no
+    gradient across that plane; now valid and exact."""
+    run = bench.run_here(ROOT / "corpus" / "real_parts" / "hole_model.stp", "tess", "affine", tmp_path)
+    assert (run.exit_code, run.message) == (0, "")
+    assert run.valid and run.free_edges == 0 and run.faces_cold == run.faces == 64
+    assert run.exact_max <= bench.AFFINE_TOLERANCE
+
+
+@pytest.mark.slow
+def test_solidworks_leg_under_a_smooth_field_does_not_fold(bench, tmp_path):
+    """The SolidWorks leg (329 faces, fillet corners of 0.36 mm) under the smooth field: the G1 corner solve
+    once moved a three-pole edge 9 mm for corners of 5e-4 deg and the cold part folded (exit 4)."""
+    run = bench.run_here(ROOT / "corpus" / "real_parts" / "lower_leg_structure_base.STEP", "fe", "smooth",
+                         tmp_path)
+    assert (run.exit_code, run.message) == (0, "")
+    assert run.valid and run.free_edges == 0 and run.faces_cold == run.faces == 329
+    assert run.exact_max < 0.01                       # the field moves the leg by up to 0.09 mm
