@@ -529,7 +529,7 @@ def _spread(normals: dict) -> float:
 
 def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
                     noise_deg: float = 1e-6, anchors: dict | None = None,
-                    decided: set[tuple[int, int]] | None = None
+                    decided: set[tuple[int, int]] | None = None, strain: float = 0.0
                     ) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
     """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
 
@@ -538,12 +538,16 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
     part : the hot part.
     curves : the morphed curve of every edge (None for degenerate edges), same degrees, knots and weights.
     edges : the hot part's tangent edges (:func:`tangent_edges`).
-    noise_deg : corners where the morph opened the angle between the faces by less than this are left alone.
+    noise_deg : corners where the morph opened the angle between the faces by less than this plus
+        ``2 strain`` times their hot angle are left alone.
     anchors : ``{(vertex, face): unit normal (3,)}`` of faces whose normal at the vertex their edges do not
         decide (a trimmed face, a face with a smooth boundary there), measured on their fitted surfaces:
         the common plane is then theirs (their mean), and only the edges of faces in ``decided`` move.
     decided : the ``(vertex, face)`` pairs whose normal the edges decide (:func:`edge_decided`); default:
         every face with two edges meeting at a corner there.
+    strain : the field's largest strain (:class:`~hot2cold.pipeline.checks.FieldScale`).  A field turns the
+        faces at a corner that is not quite one plane when hot by up to about twice its strain times their
+        angle (an affine map changes angles); that is the field's, not a kink the morph added.
 
     At a vertex, the faces joined by tangent edges there form a cluster.  Its common plane has the normal
     ``n_T``, the mean of the faces' normals (each the cross product of its two edges' tangents, oriented
@@ -594,7 +598,7 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
             if len(usable) < 2:
                 pending.append((report, (), "fewer than two faces with two edges at the vertex"))
                 continue
-            if before - hot_angle <= noise_deg:
+            if before - hot_angle <= noise_deg + 2.0 * strain * hot_angle:
                 pending.append((report, (), "no kink added"))
                 continue
             movable = [k for k in usable if k not in fixed_n]

@@ -143,6 +143,9 @@ class MorphContext:
     projector : Projector onto the hot faces and edges; tells which parameters a face's trim cuts away.
     tangent : list of TangentEdge, the edges along which the hot faces meet tangentially (empty without G1
         correction, ``Settings.g1_angle`` None).
+    strain : float, the field's largest strain (:class:`~hot2cold.pipeline.checks.FieldScale`): a kink the
+        morph adds counts beyond ``_KINK_NOISE_DEG`` plus twice this times the hot angle (what the field itself
+        does to an angle that is not quite zero when hot).
     """
 
     part: Part
@@ -153,10 +156,11 @@ class MorphContext:
     settings: Settings
     projector: Projector
     tangent: list[TangentEdge]
+    strain: float = 0.0
 
     @classmethod
     def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
-           projector: Projector) -> MorphContext:
+           projector: Projector, strain: float = 0.0) -> MorphContext:
         """The context of a classified field: the vertex displacements (eq. 10) from the nodes on or near
         the vertices, an estimator over the used nodes' foot points, the tangent edges."""
         used = classification.used
@@ -164,7 +168,7 @@ class MorphContext:
                                    settings.vertex_neighbours)
         vertex_disp = vertex_displacements(part, classification, field, estimator)
         tangent = [] if settings.g1_angle is None else tangent_edges(part, settings.g1_angle)
-        return cls(part, classification, field, vertex_disp, estimator, settings, projector, tangent)
+        return cls(part, classification, field, vertex_disp, estimator, settings, projector, tangent, strain)
 
     def trimmed_away(self, k: int, uv: np.ndarray) -> np.ndarray:
         """``(m,)`` bool: which of the parameters ``uv (m, 2)`` lie outside face ``k``'s trimmed domain."""
@@ -178,7 +182,7 @@ class MorphContext:
         if not self.tangent:
             return edge_morphs, []
         curves, corners = correct_corners(self.part, [e.curve for e in edge_morphs], self.tangent,
-                                          _KINK_NOISE_DEG, decided=edge_decided(self.part))
+                                          _KINK_NOISE_DEG, decided=edge_decided(self.part), strain=self.strain)
         return [replace(e, curve=c) for e, c in zip(edge_morphs, curves)], corners
 
     def fit_faces(self, edge_morphs: list[EdgeMorph], progress: Callable[[int, int], None] | None = None
@@ -206,7 +210,7 @@ class MorphContext:
                                         self.estimator, settings.svd_epsilon, e, settings.artificial_weight)
         if self.tangent:
             curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent, _KINK_NOISE_DEG,
-                                        decided=edge_decided(part))
+                                        decided=edge_decided(part), strain=self.strain)
             edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
         return edge_morphs
 
@@ -223,7 +227,7 @@ class MorphContext:
         if not anchors:
             return edge_morphs, face_morphs, []
         curves, corners = correct_corners(part, [e.curve for e in edge_morphs], self.tangent, _KINK_NOISE_DEG,
-                                          anchors, decided)
+                                          anchors, decided, self.strain)
         moved = {e for c in corners for e in c.edges}
         edge_morphs = [replace(m, curve=curves[e]) if e in moved else m for e, m in enumerate(edge_morphs)]
         # (a face refined to a tolerance keeps its fit: refitting would need its refined hot surface)
@@ -238,7 +242,8 @@ class MorphContext:
         (eq. 56-75); returns the face morphs and one report per tangent edge."""
         part = self.part
         surfaces = [f.surface for f in face_morphs]
-        kinked = [e for e in self.tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG
+        kinked = [e for e in self.tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG + 2.0 * self.strain
+                  * e.hot_angle_max
                   or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
         surfaces, reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
         return ([replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)],
@@ -330,7 +335,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     stages.progress("classify")
 
     # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
-    context = MorphContext.of(part, cls, field, settings, projector)
+    context = MorphContext.of(part, cls, field, settings, projector, scale.strain)
     edge_morphs, corners = context.fit_edges()
     stages.lap("edges")
     stages.progress("edges")
