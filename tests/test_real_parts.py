@@ -143,3 +143,20 @@ def test_solidworks_leg_under_a_smooth_field_does_not_fold(bench, tmp_path):
     assert (run.exit_code, run.message) == (0, "")
     assert run.valid and run.free_edges == 0 and run.faces_cold == run.faces == 329
     assert run.exact_max < 0.01                       # the field moves the leg by up to 0.09 mm
+
+
+def test_offset_faces_of_the_build123d_hull_convert_closely(bench):
+    """The hull's two offset faces (offsets of a Gordon B-spline surface): the kernel's B-spline conversion
+    put them 4.0e-6 mm off (one degree-7 patch), so that a morph exact on the converted part missed an affine
+    field by that much; they are approximated again to 1e-11 of the part, and the solid stays valid."""
+    from hot2cold.kernel.validity import check_solids
+    from hot2cold.pipeline.load import load_part
+    from hot2cold.settings import Settings
+
+    path = ROOT / "corpus" / "real_parts" / "simple_boat.step"
+    hot = read_step(path)
+    part = load_part(str(path), Settings())
+    off, _, samples = bench.exact_error(hot, part.kernel.hot, lambda p: p, 0.5)
+    assert samples > 10000
+    assert off <= 1e-9
+    assert [c.valid and c.closed for c in check_solids(part.kernel.hot)] == [True]
