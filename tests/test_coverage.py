@@ -123,3 +123,37 @@ def test_a_free_face_beside_the_solid_without_nodes_is_named_in_a_warning(tmp_pa
     assert re.match(r"WARNING hot2cold\.pipeline\.checks: 1 free face\(s\) beside the solid\(s\), in no solid, get "
                     r"no FE node: face \d+ near \(20, 0, 0\) mm; they are morphed from the field of the faces "
                     r"nearby \(artificial nodes\)$", warnings[0]), warnings[0]
+
+
+def test_a_vertex_holds_the_nodes_at_the_ends_of_its_other_edges():
+    """A face whose edges carry no node is covered when each of its vertices has a node of another edge (or
+    of a coincident vertex) at it: the box's top face, with nodes only on its four vertical edges, two of them
+    at each top corner, classified to those edges."""
+    import cadquery as cq
+
+    from hot2cold.core.model import Classification
+    from hot2cold.pipeline.checks import face_coverage
+    from hot2cold.pipeline.load import load_part
+    from hot2cold.settings import Settings
+
+    part = load_part(cq.Workplane().box(10, 10, 10).val(), Settings())
+    top = max(part.faces, key=lambda f: f.surface.poles[..., 2].min())
+    corners = {v for use in top.uses for v in part.edges[use.edge].vertices}
+    upright = [e for e in part.edges if len(set(e.vertices) & corners) == 1]
+    assert len(upright) == 4
+    role, owner, foot = [], [], []
+    for e in upright:
+        at = part.vertices[next(iter(set(e.vertices) & corners))]
+        for shift in (0.0, -1e-3):                       # on the corner and just below it
+            role.append(Role.EDGE)
+            owner.append(e.index)
+            foot.append(at + [0.0, 0.0, shift])
+    n = len(role)
+    cls = Classification(np.array(role), np.array(owner), np.full((n, 2), np.nan), np.zeros(n), np.array(foot),
+                         np.zeros(n), node_distance=0.01, edge_distance=0.01)
+    inner, boundary, covered = face_coverage(part, cls)
+    assert inner[top.index] == 0 and boundary[top.index] == 0     # none of its own
+    assert covered[top.index]
+    far = Classification(cls.role, cls.owner, cls.uv, cls.t, cls.foot - [0.0, 0.0, 1.0], cls.distance,
+                         node_distance=0.01, edge_distance=0.01)
+    assert not face_coverage(part, far)[2][top.index]           # nodes 1 mm below the corners do not count

@@ -102,19 +102,28 @@ def face_coverage(part: Part, cls: Classification) -> tuple[np.ndarray, np.ndarr
     edge or at both its vertices.
 
     A node on a face's edge is a node of that face: the edge fit (eq. 33-37) takes it, and the face's
-    boundary rows come from the morphed edges.
+    boundary rows come from the morphed edges.  A vertex holds a node when one is classified to it, or when the
+    foot point of an edge or vertex node lies within the edge distance of it: a node at the end of one edge is
+    at the vertex of the next, and a part may hold two vertices at one point (a NIST part's two half-cylinders,
+    whose straight seam edges a triangulation puts no node along, end at vertices that coincide with others,
+    which took the nodes there).
     """
     n_faces = len(part.faces)
     inner = np.bincount(cls.owner[cls.role == Role.FACE], minlength=n_faces)
     on_edge = np.bincount(cls.owner[cls.role == Role.EDGE], minlength=len(part.edges))
     on_vertex = np.bincount(cls.owner[cls.role == Role.VERTEX], minlength=len(part.vertices))
+    at_vertex = on_vertex > 0
+    feet = cls.foot[(cls.role == Role.EDGE) | (cls.role == Role.VERTEX)]
+    if len(feet) and len(part.vertices):
+        d, _ = cKDTree(feet).query(part.vertices, distance_upper_bound=cls.edge_distance)
+        at_vertex |= np.isfinite(d)
     boundary = np.zeros(n_faces, int)
     covered = np.ones(n_faces, bool)
     for edge in part.edges:
         faces = list(edge.faces)
         ends = set(edge.vertices) - {-1}
         boundary[faces] += on_edge[edge.index]
-        if not edge.degenerate and not (on_edge[edge.index] or (ends and all(on_vertex[v] for v in ends))):
+        if not edge.degenerate and not (on_edge[edge.index] or (ends and all(at_vertex[v] for v in ends))):
             covered[faces] = False
     for face in part.faces:
         vertices = {part.edges[use.edge].vertices[i] for use in face.uses for i in (0, 1)} - {-1}
