@@ -215,10 +215,8 @@ def _tighten_offset(offset, face, tolerance: float) -> None:
     for i in range(1, close.NbUPoles() + 1):
         for j in range(1, close.NbVPoles() + 1):
             converted.SetPole(i, j, close.Pole(i, j), 1.0)
-    explorer = TopExp_Explorer(face, TopAbs_EDGE)
-    while explorer.More():
-        BRepLib.SameParameter_s(TopoDS.Edge_s(explorer.Current()), 1e-7, True)
-        explorer.Next()
+    for edge in shape_map(face, TopAbs_EDGE):
+        BRepLib.SameParameter_s(edge, 1e-7, True)
     log.debug("offset surface approximated to %.3g mm with %d x %d poles", approx.MaxError(), close.NbUPoles(),
               close.NbVPoles())
 

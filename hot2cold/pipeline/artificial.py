@@ -188,24 +188,44 @@ class FieldEstimator:
         return out
 
 
-def carry_to_feet(points: np.ndarray, feet: np.ndarray, displacements: np.ndarray, used: np.ndarray,
-                  neighbours: int, offset: float) -> np.ndarray:
-    """The node displacements ``(N, 3)`` carried from the nodes ``points (N, 3)`` to their foot points
-    ``feet (N, 3)``: ``d + e(foot) - e(node)``, with ``e`` the local estimate of :class:`FieldEstimator` over
-    the ``used (N,)`` nodes at their own positions.
+#: Two points less than this share of the part's diagonal apart are one point: a displacement is carried
+#: between them (:func:`carried`) only when they are farther apart.
+GAP_SHARE = 1e-12
 
-    The fits put a node's displacement at its foot point (eq. 5, 28), the paper's rule.  A node beside its
-    face or edge (up to ``Settings.node_distance`` and ``edge_distance`` off: a face's node near an edge
-    feeds the edge, a mesh's node a little off a curved face) then moves the surface by the field's gradient
-    times that offset too much or too little; an exactly affine field at nodes 1e-2 mm beside the edges of a
-    rotor blade missed by 1.3e-5 mm.  Carried, an affine field is exact at every foot point, and a node's own
-    value (noise included) is kept but for the field's change over the offset.  Nodes less than ``offset``
-    (mm) from their foot point, and unused ones, keep their displacement.
+
+def carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEstimator, gap: float) -> np.ndarray:
+    """Displacements ``disp (m, 3)`` at the points ``at (m, 3)`` carried to the points ``to (m, 3)`` by the
+    field's change between them, ``disp + estimator(to) - estimator(at)``, where the two are more than ``gap``
+    (mm) apart; elsewhere ``disp`` as it is.
+
+    The fits put a displacement where it is wanted: a node's at its foot point (eq. 5, 28), an edge's on the
+    face's pcurve, a vertex's at its edges' curve ends, an edge's poles on a face's side row.  Across the part's
+    own small gaps between those the field changes by its gradient times the gap; carried, an exactly affine
+    field stays exact, and a node's own value (noise included) is kept but for that change."""
+    apart = np.linalg.norm(to - at, axis=1) > gap
+    if not apart.any():
+        return disp
+    out = np.array(disp, float)
+    out[apart] += estimator(to[apart]) - estimator(at[apart])
+    return out
+
+
+def carry_to_feet(points: np.ndarray, feet: np.ndarray, displacements: np.ndarray, used: np.ndarray,
+                  neighbours: int, gap: float) -> np.ndarray:
+    """The node displacements ``(N, 3)`` carried (:func:`carried`) from the nodes ``points (N, 3)`` to their foot
+    points ``feet (N, 3)``, by the local estimate of :class:`FieldEstimator` over the ``used (N,)`` nodes at their
+    own positions.
+
+    A node beside its face or edge (up to ``Settings.node_distance`` and ``edge_distance`` off: a face's node
+    near an edge feeds the edge, a mesh's node a little off a curved face) would otherwise move the surface by
+    the field's gradient times that offset too much or too little: an exactly affine field at nodes 1e-2 mm
+    beside the edges of a rotor blade missed by 1.3e-5 mm.  Nodes less than ``gap`` (mm) from their foot point,
+    and unused ones, keep their displacement.
     """
     out = np.array(displacements, float)
-    far = used & (np.linalg.norm(points - np.where(used[:, None], feet, points), axis=1) > offset)
-    if not far.any() or used.sum() < 4:
-        return out
+    off = used & (np.linalg.norm(points - np.where(used[:, None], feet, points), axis=1) > gap)
+    if not off.any() or used.sum() < 4:
+        return out                      # no estimator built for a field whose nodes sit on their feet
     estimate = FieldEstimator(points[used], displacements[used], neighbours)
-    out[far] += estimate(feet[far]) - estimate(points[far])
+    out[off] = carried(out[off], points[off], feet[off], estimate, gap)
     return out

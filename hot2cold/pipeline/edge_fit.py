@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .artificial import FieldEstimator
+from .artificial import GAP_SHARE, FieldEstimator, carried
 from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
@@ -66,15 +66,10 @@ def vertex_displacements(part: Part, cls: Classification, field: DisplacementFie
 def end_displacements(part: Part, edge: Edge, vertex_disp: np.ndarray, estimator: FieldEstimator) -> np.ndarray:
     """The displacements ``(2, 3)`` of the end poles of ``edge``'s curve: its vertices' (eq. 10), carried from
     the vertex to the curve's end by the field's change over the gap between them (a vertex may sit up to its
-    tolerance off the ends of its edges; :func:`hot2cold.pipeline.artificial.carry_to_feet`)."""
-    ends = vertex_disp[list(edge.vertices)]
-    curve_ends = edge.curve.poles[[0, -1]]
-    at = part.vertices[list(edge.vertices)]
-    gap = np.linalg.norm(curve_ends - at, axis=1) > 1e-12 * part.diagonal
-    if gap.any():
-        ends = ends.copy()
-        ends[gap] += estimator(curve_ends[gap]) - estimator(at[gap])
-    return ends
+    tolerance off the ends of its edges; :func:`hot2cold.pipeline.artificial.carried`)."""
+    vertices = list(edge.vertices)
+    return carried(vertex_disp[vertices], part.vertices[vertices], edge.curve.poles[[0, -1]], estimator,
+                   GAP_SHARE * part.diagonal)
 
 
 def _sparse_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:

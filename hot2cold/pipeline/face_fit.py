@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from .artificial import FieldEstimator
+from .artificial import GAP_SHARE, FieldEstimator, carried
 from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_basis
 from .edge_fit import EdgeMorph
 from ..io.field import DisplacementField
@@ -94,8 +94,8 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
         if np.ptp(row, axis=0).max() > tol:
             return None
         at = part.vertices[edge.vertices[0]]
-        return side, _carried(np.broadcast_to(vertex_disp[edge.vertices[0]], row.shape), np.broadcast_to(at, row.shape),
-                              row, estimator, 1e-12 * part.diagonal)
+        return side, carried(np.broadcast_to(vertex_disp[edge.vertices[0]], row.shape), np.broadcast_to(at, row.shape),
+                              row, estimator, GAP_SHARE * part.diagonal)
     curve = edge.curve
     knots = surface.v_knots if side.axis == 0 else surface.u_knots
     degree = surface.v_degree if side.axis == 0 else surface.u_degree
@@ -114,18 +114,7 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
     ratio = row_w / (np.ones(len(row)) if weights is None else weights)
     if not np.allclose(ratio, ratio[0], rtol=1e-9, atol=0):
         return None
-    return side, _carried(morphed - poles, poles, row, estimator, 1e-12 * part.diagonal)
-
-
-def _carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEstimator, gap: float) -> np.ndarray:
-    """Displacements ``disp (m, 3)`` at points ``at (m, 3)`` carried to the points ``to (m, 3)`` by the field's
-    change between them, where they are more than ``gap`` (mm) apart."""
-    apart = np.linalg.norm(to - at, axis=1) > gap
-    if not apart.any():
-        return disp
-    out = np.array(disp, float)
-    out[apart] += estimator(to[apart]) - estimator(at[apart])
-    return out
+    return side, carried(morphed - poles, poles, row, estimator, GAP_SHARE * part.diagonal)
 
 
 def _candidate_abscissae(breaks: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
@@ -212,8 +201,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         else:
             on_edge = evaluate_curve(edge.curve, use.t)
             moved = evaluate_curve(edge_morphs[use.edge].curve, use.t) - on_edge
-        moved = _carried(moved, on_edge, evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1]), estimator,
-                         1e-12 * part.diagonal)
+        moved = carried(moved, on_edge, evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1]), estimator,
+                         GAP_SHARE * part.diagonal)
         uv_rows.append(use.uv)
         target_rows.append(moved)
     edge_rows = sum(len(r) for r in uv_rows)

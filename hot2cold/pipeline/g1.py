@@ -135,6 +135,14 @@ def kink_added(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) ->
     return _max(kink_angles(surfaces[fa], uv_a, surfaces[fb], uv_b)) - edge.hot_angle_max
 
 
+def kink_bound(hot_angle: float, noise_deg: float, strain: float) -> float:
+    """The largest angle (degrees) the morph may add to a hot angle ``hot_angle`` between tangent faces (along an
+    edge or at a corner) and leave alone: rounding (``noise_deg``) plus what a field of largest strain
+    ``strain`` does to an angle that is not quite zero when hot (an affine map changes angles, by up to about
+    twice its strain in proportion)."""
+    return noise_deg + 2.0 * strain * hot_angle
+
+
 def _max(angles: np.ndarray) -> float:
     finite = angles[np.isfinite(angles)]
     return float(finite.max()) if finite.size else float("nan")
@@ -598,7 +606,7 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
             if len(usable) < 2:
                 pending.append((report, (), "fewer than two faces with two edges at the vertex"))
                 continue
-            if before - hot_angle <= noise_deg + 2.0 * strain * hot_angle:
+            if before - hot_angle <= kink_bound(hot_angle, noise_deg, strain):
                 pending.append((report, (), "no kink added"))
                 continue
             movable = [k for k in usable if k not in fixed_n]

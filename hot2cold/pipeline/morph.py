@@ -25,14 +25,14 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .artificial import FieldEstimator, carry_to_feet
+from .artificial import GAP_SHARE, FieldEstimator, carry_to_feet
 from .checks import FieldScale, check_cold, check_coverage, check_hot, check_result
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
 from .g1 import (CornerReport, G1Report, TangentEdge, correct_corners, correct_g1, edge_decided, kink_added,
-                 surface_corner_normals, tangent_edges, with_corners)
+                 kink_bound, surface_corner_normals, tangent_edges, with_corners)
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
@@ -242,8 +242,8 @@ class MorphContext:
         (eq. 56-75); returns the face morphs and one report per tangent edge."""
         part = self.part
         surfaces = [f.surface for f in face_morphs]
-        kinked = [e for e in self.tangent if kink_added(part, surfaces, e) > _KINK_NOISE_DEG + 2.0 * self.strain
-                  * e.hot_angle_max
+        kinked = [e for e in self.tangent
+                  if kink_added(part, surfaces, e) > kink_bound(e.hot_angle_max, _KINK_NOISE_DEG, self.strain)
                   or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
         surfaces, reports = correct_g1(part, surfaces, [f.tied_sides for f in face_morphs], kinked)
         return ([replace(f, surface=surface) for f, surface in zip(face_morphs, surfaces)],
@@ -328,7 +328,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
         field = field.take(cls.node)
     check_coverage(part, cls, field, settings)
     field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
-                                                          settings.vertex_neighbours, 1e-12 * part.diagonal),
+                                                          settings.vertex_neighbours, GAP_SHARE * part.diagonal),
                               field.node_ids, field.source)
     scale = FieldScale.of(cls, field)
     stages.lap("classify")
