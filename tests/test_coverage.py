@@ -157,3 +157,37 @@ def test_a_vertex_holds_the_nodes_at_the_ends_of_its_other_edges():
     far = Classification(cls.role, cls.owner, cls.uv, cls.t, cls.foot - [0.0, 0.0, 1.0], cls.distance,
                          node_distance=0.01, edge_distance=0.01)
     assert not face_coverage(part, far)[2][top.index]           # nodes 1 mm below the corners do not count
+
+
+def test_a_node_on_a_vertex_or_edge_that_no_face_takes_is_still_the_vertex_or_edge_node():
+    """The vise's vertex 335: its node (5e-10 mm off) had foot points classified outside both faces there
+    (their pcurves miss the vertex by more than the classifier's tolerance), was ignored, and the faces were
+    refused as uncovered.  Here every foot point is classified outside: the nodes on vertices and edges are
+    still claimed by them (with foot points on them), the nodes inside the faces are ignored."""
+    import cadquery as cq
+
+    from hot2cold.core.domain import Trim
+    from hot2cold.io.field import as_field
+    from hot2cold.kernel.project import Projector
+    from hot2cold.pipeline.classify import classify_nodes
+    from hot2cold.pipeline.load import load_part
+    from hot2cold.settings import Settings
+
+    class NothingInside(Projector):
+        def classify(self, k, uv):
+            return np.full(len(np.reshape(uv, (-1, 2))), Trim.OUTSIDE)
+
+    settings = Settings()
+    part = load_part(cq.Workplane().box(10, 10, 10).val(), settings)
+    corner = part.vertices[:, None, :]
+    mid_edge = np.array([[5.0, 5.0, 0.3], [5.0, -2.0, -5.0], [0.0, 5.0, 5.0]])
+    inside = np.array([[0.5, 0.5, 5.0], [5.0, 1.0, 2.0]])
+    points = np.concatenate([part.vertices + 1e-9, mid_edge, inside])
+    field = as_field((points, FIELD(points)), "mm", None)
+    cls = classify_nodes(part, field, settings, NothingInside(part.kernel.faces, part.kernel.edges))
+    nv = len(part.vertices)
+    assert np.all(cls.role[:nv] == Role.VERTEX)
+    np.testing.assert_array_equal(cls.owner[:nv], np.argmin(np.linalg.norm(points[:nv] - corner, axis=2), axis=1))
+    assert np.all(cls.role[nv:nv + 3] == Role.EDGE)
+    np.testing.assert_allclose(cls.foot[nv:nv + 3], mid_edge, atol=1e-9)
+    assert np.all(cls.role[nv + 3:] == Role.IGNORED)

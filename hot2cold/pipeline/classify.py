@@ -240,7 +240,8 @@ def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_
         foot[idx] = evaluate_surface(part.faces[k].surface, uv[idx, 0], uv[idx, 1])
         distance[idx] = best[idx]
 
-    _claim_vertices_and_edges(part, boundary, points, role, owner, uv, t, foot, distance, edge_distance, projector)
+    _claim_vertices_and_edges(part, boundary, points, role, owner, uv, t, foot, distance, edge_distance, projector,
+                              np.unique(pair_node), np.unique(pair_face))
     return role, owner, uv, t, foot, distance
 
 
@@ -278,14 +279,31 @@ class _Boundary:
 
 
 def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv, t, foot, distance, edge_distance,
-                              projector):
-    """Re-assign face nodes that lie on a vertex or an edge of their face (in place)."""
-    used = np.flatnonzero(role == Role.FACE)
+                              projector, candidates: np.ndarray, faces: np.ndarray):
+    """Re-assign face nodes that lie on a vertex or an edge of their face, and give the ``candidates`` (node
+    indices ``(c,)``) no face took to a vertex or edge of ``faces`` (face indices, the group's) they lie on
+    (in place).
+
+    A node on a corner or an edge is on every face there, but its foot point on each may be classified
+    outside when the face's pcurves miss the vertex by more than the classifier's tolerance (the vise's
+    vertex 335: the node 5e-10 mm from it, outside both faces).  Such a node still fixes the vertex.
+    """
+    taken = role == Role.FACE
+    stray = candidates[role[candidates] == Role.IGNORED]
+    used = np.concatenate([np.flatnonzero(taken), stray])
     if len(used) == 0:
         return
+    in_group = np.zeros(len(part.faces), bool)
+    in_group[faces] = True
     if boundary.vertices is not None:
         d_v, v_idx = boundary.vertices.query(points[used])
         at_vertex = d_v <= edge_distance
+        if len(stray):
+            group_vertex = np.zeros(len(part.vertices), bool)
+            for edge in part.edges:
+                if in_group[list(edge.faces)].any():
+                    group_vertex[list(edge.vertices)] = True
+            at_vertex &= taken[used] | group_vertex[v_idx]
         idx = used[at_vertex]
         role[idx], owner[idx] = Role.VERTEX, v_idx[at_vertex]
         foot[idx], distance[idx] = part.vertices[v_idx[at_vertex]], d_v[at_vertex]
@@ -298,9 +316,13 @@ def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv
     close = used[near <= edge_distance + h]
     pair_node, pair_edge = _candidates(tree, sample_edge, points[close], edge_distance, h)
     best = np.full(len(points), np.inf)
+    face_of = np.where(taken, owner, -1)           # owner turns into an edge index as edges claim nodes
     for e, group in runs(pair_edge):
         nodes = close[pair_node[group]]
-        nodes = nodes[np.isin(owner[nodes], part.edges[e].faces)]
+        mine = np.isin(face_of[nodes], part.edges[e].faces)
+        if in_group[list(part.edges[e].faces)].any():
+            mine |= ~taken[nodes]
+        nodes = nodes[mine]
         if not len(nodes):
             continue
         e_t, e_dist = projector.to_edge(e, points[nodes])
