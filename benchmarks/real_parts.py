@@ -211,13 +211,19 @@ def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
 
     ``exact_map`` maps hot points ``(m, 3)`` to exact cold points ``(m, 3)``.  The faces are those of the
     solids (:func:`solid_faces`); the cold part must have as many.  A sample the kernel cannot project counts
-    as ``inf``.
+    as ``inf``.  The kernel's foot points are polished by Newton's method on the cold face's own B-spline
+    surface (:func:`hot2cold.core.footpoint.project_to_surface`, the nearer of the two kept): the kernel's
+    projection stops about 2e-8 mm short on Rotor 67's degree-14 faces, above the affine target of 1e-8 mm.
     """
     from OCP.TopoDS import TopoDS_Compound
     from OCP.BRep import BRep_Builder
 
+    from hot2cold.core.footpoint import project_to_surface
+    from hot2cold.errors import KernelError
+    from hot2cold.kernel.convert import surface_to_record
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.sampling import face_samples
+    from hot2cold.kernel.topology import bspline_surface
 
     hot_faces, cold_faces = solid_faces(hot), solid_faces(cold)
     if len(hot_faces) != len(cold_faces):
@@ -229,7 +235,16 @@ def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
     projector = Projector(cold_faces, [])
     worst, where, count = 0.0, -1, 0
     for k, (_, points) in enumerate(face_samples(compound, spacing)):
-        _, dist = projector.to_face(k, exact_map(points))
+        cold_points = exact_map(points)
+        uv, dist = projector.to_face(k, cold_points)
+        found = np.isfinite(dist)
+        try:
+            surface = surface_to_record(*bspline_surface(cold_faces[k]))
+        except KernelError:                       # an analytic face (not a morph's): as the kernel found it
+            surface = None
+        if found.any() and surface is not None:
+            fp = project_to_surface(surface, cold_points[found], uv[found], projector.face_box(k))
+            dist[found] = np.where(fp.settled, np.minimum(dist[found], fp.distance), dist[found])
         count += len(dist)
         if len(dist) and dist.max() > worst:
             worst, where = float(dist.max()), k

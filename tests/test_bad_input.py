@@ -677,3 +677,10 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     assert 0.9 < bumped.between[top] <= 1.0       # the distance to a tent 1 mm high over 5 mm: 0.98 at its top
     assert np.nanmax(np.delete(bumped.between, top)) < 1e-9
     assert any(p.startswith(f"leaves the field between the nodes: face {top} is 0.9") for p in bumped.problems[0])
+    # the bump also moves the face farther than the field moves any node (0.3 mm, 1.5 x that + the node
+    # distance accepted): the README's row of that message
+    scale = args[3]
+    assert 0.2 < scale.largest < 0.4 and scale.move_bound < 0.9
+    assert any(re.match(rf"moves face {top} by up to 1\.\d+ mm near \(.*\) mm, farther than the field moves any "
+                        rf"node \(0\.\d+ mm; up to 1\.5 x that \+ 0\.\d+ mm accepted\)$", p)
+               for p in bumped.problems[0]), bumped.problems[0]

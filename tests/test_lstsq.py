@@ -95,6 +95,27 @@ def test_a_prior_fills_the_dropped_directions_and_changes_nothing_else():
         solve_tsvd(a, b, prior=np.zeros((7,)))
 
 
+def test_a_callable_prior_is_called_only_where_directions_are_dropped():
+    rng = np.random.default_rng(5)
+    base = rng.normal(size=(60, 5))
+    a = np.c_[base, base[:, 0], np.zeros(60)]          # rank 5 of 7
+    b = rng.normal(size=(60, 3))
+    prior = rng.normal(size=(7, 3))
+    calls = []
+
+    def lazy():
+        calls.append(1)
+        return prior
+
+    np.testing.assert_array_equal(solve_tsvd(a, b, prior=lazy).x, solve_tsvd(a, b, prior=prior).x)
+    assert len(calls) == 1
+    full = solve_tsvd(base, b, prior=lambda: calls.append(1))    # full rank: never called
+    assert full.rank == 5 and len(calls) == 1
+    assert solve_tsvd(np.zeros((0, 7)), np.zeros((0, 3)), prior=lazy).x.tolist() == prior.tolist()  # no rows
+    with pytest.raises(ValueError, match=r"prior must be \(7, 3\)"):
+        solve_tsvd(a, b, prior=lambda: np.zeros(7))
+
+
 def test_ill_conditioned_columns_are_truncated():
     rng = np.random.default_rng(4)
     s = 80

@@ -435,6 +435,26 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     return out
 
 
+def span_cells(breaks: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The cells of a parameter direction and a candidate point in each (for artificial nodes, eq. 39).
+
+    Every knot span ``[breaks[r], breaks[r + 1])`` (``breaks (spans + 1,)``, the distinct knots of the
+    domain) is cut into ``degree + 1`` equal cells.  Returns the candidates ``t (m,)``, the centres of the
+    cells and the two ends of the domain (``m = spans * (degree + 1) + 2``: at least one per basis function's
+    support, more than there are basis functions), the knot span ``(m,)`` and the cell ``(m,)`` of each (an
+    end is in the first or the last cell), and the cells' edges ``(spans * (degree + 1) + 1,)``.
+    """
+    breaks = np.asarray(breaks, float)
+    spans, m = len(breaks) - 1, degree + 1
+    step = np.diff(breaks)[:, None] / m
+    edges = np.append((breaks[:-1, None] + np.arange(m) * step).ravel(), breaks[-1])
+    centres = (breaks[:-1, None] + (np.arange(m) + 0.5) * step).ravel()
+    t = np.concatenate([breaks[:1], centres, breaks[-1:]])
+    span = np.concatenate([[0], np.repeat(np.arange(spans), m), [spans - 1]])
+    cell = np.concatenate([[0], np.arange(spans * m), [spans * m - 1]])
+    return t, span, cell, edges
+
+
 # ----------------------------------------------------------------------------------------------------------
 # Refinement: knot insertion and degree elevation, exact to rounding (the one copy: hot2cold.pipeline.refine
 # refines the morph's records with it, and hot2cold.kernel.rebuild gives the kernel objects the refined

@@ -20,7 +20,6 @@ reduced block by block to the triangular factor of a QR decomposition (:func:`so
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -197,10 +196,12 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
     B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation.
     epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * s * epsilon``; default the
         paper's FLT_EPSILON (single precision, about 1.2e-7).
-    prior : (n, k) or (n,) array or None, a guess of ``x`` that the dropped directions keep: the solution is
-        ``prior + x_c`` with ``x_c`` the truncated minimum-norm solution of ``A x_c = B - A prior``.  Where
-        nothing is dropped the prior changes nothing (up to rounding); where directions are dropped they take
-        the prior's value instead of zero.  None: zero, the paper's minimum-norm solution.
+    prior : (n, k) or (n,) array, or a callable returning one, or None: a guess of ``x`` that the dropped
+        directions keep: the solution is the truncated minimum-norm solution plus the prior's component in
+        the dropped directions, ``x = V_r Sigma_r^-1 U_r^T B + (I - V_r V_r^T) prior``.  Where nothing is
+        dropped the prior changes nothing (and a callable is not called: a prior that costs a solve of its own
+        is paid for only where it is used); where directions are dropped they take the prior's value instead
+        of zero.  None: zero, the paper's minimum-norm solution.
     block_rows : int > 0 or None, rows of ``A`` reduced at a time; None: ``ROWS_PER_COLUMN`` times the
         columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
         ``block_bytes``.  It changes the rounding, not the result.
@@ -242,14 +243,8 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
         raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
     if not np.all(np.isfinite(b)):
         raise ValueError(f"B {b.shape} holds NaN or inf")
-    if prior is not None:
-        x0 = np.asarray(prior, dtype=float)
-        if x0.shape != (n,) + b.shape[1:]:
-            raise ValueError(f"A is {A.shape} and B {b.shape}, so prior must be {(n,) + b.shape[1:]}, got {x0.shape}")
-        if not np.all(np.isfinite(x0)):
-            raise ValueError(f"prior {x0.shape} holds NaN or inf")
-        sol = solve_tsvd(A, b - A @ x0, epsilon, block_rows=block_rows, block_bytes=block_bytes)
-        return dataclasses.replace(sol, x=sol.x + x0)
+    if prior is not None and not callable(prior):
+        _checked_prior(prior, A.shape, b.shape)
 
     vector = b.ndim == 1
     b2 = b.reshape(s, 1) if vector else b
@@ -257,6 +252,8 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
 
     if s == 0 or n == 0:
         x = np.zeros((n, k))
+        if prior is not None and n:
+            x = _checked_prior(prior() if callable(prior) else prior, A.shape, b.shape).reshape(n, k).copy()
         return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
     if s > n:
@@ -276,7 +273,22 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
     keep = sigma > cutoff
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
     x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
+    if prior is not None and rank < n:
+        x0 = _checked_prior(prior() if callable(prior) else prior, A.shape, b.shape).reshape(n, k)
+        x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
     condition = float(sigma[0] / sigma[rank - 1]) if rank else float("nan")
     return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
                         sigma_max=float(sigma[0]), sigma_min=float(sigma[-1]), cutoff=cutoff,
                         singular_values=sigma)
+
+
+def _checked_prior(prior, a_shape: tuple[int, int], b_shape: tuple[int, ...]) -> np.ndarray:
+    """``prior`` as a float array of shape ``(n,) + b_shape[1:]`` for ``A`` of ``a_shape``, or ValueError."""
+    x0 = np.asarray(prior, dtype=float)
+    n = a_shape[1]
+    if x0.shape != (n,) + tuple(b_shape[1:]):
+        raise ValueError(f"A is {a_shape} and B {b_shape}, so prior must be {(n,) + tuple(b_shape[1:])}, "
+                         f"got {x0.shape}")
+    if not np.all(np.isfinite(x0)):
+        raise ValueError(f"prior {x0.shape} holds NaN or inf")
+    return x0

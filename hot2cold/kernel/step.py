@@ -96,13 +96,15 @@ def read_back(file: str | os.PathLike, written: TopoDS_Shape, path: str | os.Pat
     assembly's instances need not come back in the order they were written).  ``path`` names the output in
     the message.  What a morph's own checks pass can still fail here: the STEP writer approximates, and a
     tolerance the kernel accepted in memory may not survive the file."""
+    from .faults import solid_faults
     from .topology import shape_map
     from .validity import check_solids
 
     reader = STEPControl_Reader()
     if reader.ReadFile(str(file)) != IFSelect_RetDone or reader.TransferRoots() == 0:
         raise MorphError(f"the cold STEP for {path} does not read back (reader status); not written")
-    back = check_solids(reader.OneShape())
+    shape = reader.OneShape()
+    back = check_solids(shape)
     sent = sorted(len(shape_map(solid, TopAbs_FACE)) for solid in shape_map(written, TopAbs_SOLID))
     if sorted(c.faces for c in back) != sent:
         raise MorphError(f"the cold STEP for {path} reads back with {len(back)} solids of "
@@ -110,5 +112,11 @@ def read_back(file: str | os.PathLike, written: TopoDS_Shape, path: str | os.Pat
     for s, check in enumerate(back):
         if not check.valid or not check.closed:
             what = "not valid (BRepCheck)" if not check.valid else f"open ({check.free_edges} free edges)"
-            raise MorphError(f"cold solid {s} of {path} is {what} when its STEP file is read back; not written")
+            detail = ""
+            if not check.valid:
+                solid = shape_map(shape, TopAbs_SOLID)[s]
+                faults = solid_faults(solid, list(enumerate(shape_map(solid, TopAbs_FACE))))
+                detail = ": " + "; ".join(map(str, faults[:3])) + ("; ..." if len(faults) > 3 else "")
+            raise MorphError(f"cold solid {s} of {path} is {what} when its STEP file is read back{detail}; "
+                             "not written")
     log.info("read back %s: %d valid closed solids", path, len(back))

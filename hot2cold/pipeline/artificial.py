@@ -192,6 +192,11 @@ class FieldEstimator:
 #: between them (:func:`carried`) only when they are farther apart.
 GAP_SHARE = 1e-12
 
+#: Cut-off factor (eq. 20) of the fits that carry the field's estimate onto all poles of a curve or surface
+#: (the priors of the edge and face fits): their points determine every pole, so only rounding is cut (a
+#: degree-14 span sampled at the centres of its 15 cells is conditioned about 1e5).
+PRIOR_EPSILON = 1e-12
+
 
 def carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEstimator, gap: float) -> np.ndarray:
     """Displacements ``disp (m, 3)`` at the points ``at (m, 3)`` carried to the points ``to (m, 3)`` by the

@@ -6,9 +6,10 @@ least-squares problem of eq. (11)-(18) by truncated SVD (eq. 19-20):
 
     sum_{i=1..n-1} N_i(u_k) dp_i = dd_k - N_0(u_k) dp_0 - N_n(u_k) dp_n,   k over the edge's nodes.
 
-Where the cut-off drops combinations of inner poles, they keep the field's local estimate at the poles (the
-solver's ``prior``) rather than zero.  A vertex may sit up to its tolerance off the ends of its edges: the end
-poles take the vertex displacement carried across that gap (:func:`end_displacements`).
+Where the cut-off drops combinations of inner poles, they keep the field's local estimate carried onto the
+poles (the solver's ``prior``, :func:`_field_prior`) rather than zero.  A vertex may sit up to its tolerance
+off the ends of its edges: the end poles take the vertex displacement carried across that gap
+(:func:`end_displacements`).
 """
 from __future__ import annotations
 
@@ -17,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .artificial import GAP_SHARE, FieldEstimator, carried
-from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve
+from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
+from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve, span_cells
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
 from ..core.model import Classification, Edge, Part, Role
@@ -36,7 +37,8 @@ class EdgeMorph:
     index : int, the edge.
     curve : BSplineCurve or None, the morphed curve (None for a degenerate edge).
     nodes : int, FE nodes that fed the edge.
-    artificial : int, artificial nodes added in knot spans with fewer than degree + 1 nodes.
+    artificial : int, artificial nodes added in knot spans with fewer than degree + 1 nodes and in the empty
+        cells of the others (:func:`_artificial_parameters`).
     unknowns : int, inner poles solved for (3 coordinates each).
     rank : int, rank kept by the truncated SVD.
     condition : float, condition number of the kept part of the design matrix (NaN if nothing solved).
@@ -72,19 +74,34 @@ def end_displacements(part: Part, edge: Edge, vertex_disp: np.ndarray, estimator
                    GAP_SHARE * part.diagonal)
 
 
-def _sparse_spans(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
-    """Parameters ``(m,)`` of artificial nodes for the knot spans of ``curve`` that hold fewer than
-    ``degree + 1`` of the parameters ``t``.
+def _artificial_parameters(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
+    """Parameters ``(m,)`` of artificial nodes of ``curve`` given its nodes' parameters ``t``: every knot span
+    is cut into ``degree + 1`` equal cells (:func:`~hot2cold.core.bspline.span_cells`); a span holding fewer
+    than ``degree + 1`` of the ``t`` gets a node at the centre of each of its cells, any other span at the
+    centre of each cell that holds none.
 
     A span's polynomial piece has ``degree + 1`` coefficients; with fewer data it is not determined by the
     nodes (an empty span is the paper's case, a span with a node or two is the same problem on thin
-    faces such as a trailing edge).  Such a span gets ``degree + 1`` artificial nodes spread over it.
+    faces such as a trailing edge), and nodes bunched in one end of a span leave the other end free.
     """
     breaks = np.unique(curve.knots[curve.degree:curve.n_poles + 1])
-    counts, _ = np.histogram(t, bins=breaks)
-    inside = (np.arange(curve.degree + 1) + 0.5) / (curve.degree + 1)
-    sparse = np.flatnonzero(counts < curve.degree + 1)
-    return (breaks[sparse, None] + inside * (breaks[sparse + 1] - breaks[sparse])[:, None]).ravel()
+    candidates, span, cell, edges = span_cells(breaks, curve.degree)
+    candidates, span, cell = candidates[1:-1], span[1:-1], cell[1:-1]      # the ends are the vertices'
+    counts = np.histogram(t, bins=breaks)[0]
+    cells = np.histogram(t, bins=edges)[0]
+    return candidates[(counts[span] < curve.degree + 1) | (cells[cell] == 0)]
+
+
+def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEstimator) -> np.ndarray:
+    """Displacements ``(n - 2, 3)`` of the inner poles (the ends at ``end_disp (2, 3)``) that carry the field's
+    local estimate along the whole curve: the least-squares fit of ``estimator`` at the centre of every cell
+    of :func:`_artificial_parameters` and at the ends.  The truncated SVD keeps this in the directions it drops
+    (the estimate at the poles themselves is one for an affine field only: see
+    :func:`hot2cold.pipeline.face_fit._field_prior`)."""
+    t = span_cells(np.unique(curve.knots[curve.degree:curve.n_poles + 1]), curve.degree)[0]
+    basis = curve_basis(curve, t).toarray()
+    rhs = estimator(evaluate_curve(curve, t)) - basis[:, [0, -1]] @ end_disp
+    return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=estimator(curve.poles[1:-1])).x
 
 
 def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
@@ -107,7 +124,7 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     artificial = 0
     weight = np.ones(len(t))
     if estimator is not None and n > 2:
-        t_art = _sparse_spans(curve, t)
+        t_art = _artificial_parameters(curve, t)
         if len(t_art):
             artificial = len(t_art)
             t = np.concatenate([t, t_art])
@@ -117,7 +134,7 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     if n > 2 and len(t):
         basis = weight[:, None] * curve_basis(curve, t).toarray()
         rhs = weight[:, None] * disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
-        prior = None if estimator is None else estimator(curve.poles[1:-1])
+        prior = None if estimator is None else (lambda: _field_prior(curve, end_disp, estimator))
         sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon, prior=prior)         # eq. (13)-(20)
         delta[1:-1] = sol.x
         rank, condition = sol.rank, sol.condition

@@ -54,6 +54,11 @@ log = logging.getLogger(__name__)
 #: A kink (degrees) the morph adds below this is rounding: such edges are left as they are.
 _KINK_NOISE_DEG = 1e-6
 
+#: An edge's curve on a face is projected again from the cold edge where it misses it by more than this share
+#: of the part's diagonal (:func:`~hot2cold.kernel.tolerances.fit_tolerances`): the faces' parameters slid
+#: against the edges', which an affine field never does.
+_REPROJECT_SHARE = 1e-7
+
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
 
@@ -368,7 +373,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     cold_vertices = part.vertices + context.vertex_displacements
     cold = rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
     stages.lap("rebuild")
-    gaps = fit_tolerances(cold)
+    gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
     cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, context.estimator)
