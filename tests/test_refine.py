@@ -23,7 +23,8 @@ from hot2cold.kernel.sampling import fe_surface_nodes
 from hot2cold.kernel.step import read_step, write_step
 from hot2cold.pipeline.morph import check_result, morph
 from hot2cold.core.model import side_along
-from hot2cold.pipeline.refine import edge_distances, face_distances
+from hot2cold.core.footpoint import curve_distances
+from hot2cold.pipeline.refine import face_distances
 from hot2cold.settings import Settings
 
 from conftest import SAMPLES
@@ -139,7 +140,7 @@ def test_local_distances_match_the_kernel_projection():
     curve = _curve(True, 3)
     t = RNG.uniform(0, 1, 100)
     points = evaluate_curve(curve, t) + RNG.normal(scale=1e-4, size=(100, 3))
-    d = edge_distances(curve, points, t + RNG.uniform(-0.01, 0.01, 100))
+    d = curve_distances(curve, points, t + RNG.uniform(-0.01, 0.01, 100))
     oracle = [GeomAPI_ProjectPointOnCurve(gp_Pnt(*p), record_to_curve(curve)).LowerDistance() for p in points]
     assert np.abs(d - np.array(oracle)).max() <= 1e-9
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import BSplineSurface, evaluate_surface, surface_jet
+from .bspline import BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve, evaluate_surface, surface_jet
 
 #: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
 #: as Newton's method converges quadratically the error left is of the order of the step squared (1e-18 of
@@ -41,6 +41,8 @@ from .bspline import BSplineSurface, evaluate_surface, surface_jet
 STEP_RTOL = 1e-9
 #: Newton iterations at the most.
 MAX_ITERATIONS = 25
+#: Gauss-Newton steps of :func:`curve_distances`.
+CURVE_STEPS = 8
 #: Nodes evaluated together (bounds the memory of the jet: about 1 kB a node for bicubic patches).
 CHUNK = 65_536
 
@@ -138,3 +140,22 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
     settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
     return uv, distance, settled
+
+
+def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Distances ``(m,)`` of ``points (m, 3)`` to ``curve`` by Gauss-Newton from the parameters ``t (m,)`` (the
+    points' hot parameters, or the kernel's foot points to polish): the smallest distance met on the way, an
+    upper bound of the distance to the curve, and no larger than the start's."""
+    points = np.asarray(points, float)
+    lo, hi = curve.domain
+    t = np.clip(np.array(t, float), lo, hi)
+    best = np.full(len(points), np.inf)
+    for step in range(CURVE_STEPS + 1):
+        r = points - evaluate_curve(curve, t)
+        best = np.minimum(best, np.linalg.norm(r, axis=1))
+        if step == CURVE_STEPS:
+            break
+        d = curve_derivative_basis(curve, t) @ curve.poles
+        dd = np.sum(d * d, 1)
+        t = np.clip(t + np.where(dd > 1e-300, np.sum(d * r, 1) / np.where(dd > 1e-300, dd, 1.0), 0.0), lo, hi)
+    return best

@@ -384,7 +384,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
 
     # report (step 8, eq. 21-22): each node's cold target projected onto the morphed geometry
     errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
-                         [f.surface for f in face_morphs])
+                         [f.surface for f in face_morphs], [e.curve for e in edge_morphs])
     stages.lap("report")
     report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,

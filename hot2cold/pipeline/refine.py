@@ -37,8 +37,9 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve,
-                            evaluate_surface, refine_curve, refine_surface, surface_derivatives)
+from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_surface, refine_curve,
+                            refine_surface, surface_derivatives)
+from ..core.footpoint import curve_distances
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
@@ -140,23 +141,6 @@ def face_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, 
     return best
 
 
-def edge_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Distances ``(m,)`` of ``points`` to ``curve`` by Gauss-Newton from the parameters ``t (m,)``."""
-    points = np.asarray(points, float)
-    lo, hi = curve.domain
-    t = np.clip(np.array(t, float), lo, hi)
-    best = np.full(len(points), np.inf)
-    for step in range(_NEWTON_STEPS + 1):
-        r = points - evaluate_curve(curve, t)
-        best = np.minimum(best, np.linalg.norm(r, axis=1))
-        if step == _NEWTON_STEPS:
-            break
-        d = curve_derivative_basis(curve, t) @ curve.poles
-        dd = np.sum(d * d, 1)
-        t = np.clip(t + np.where(dd > 1e-300, np.sum(d * r, 1) / np.where(dd > 1e-300, dd, 1.0), 0.0), lo, hi)
-    return best
-
-
 def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField):
     """Errors of a face at its nodes: ``(uv (m, 2), error (m,))``, the distances of eq. (21)."""
     nodes = cls.nodes_of(Role.FACE, face.index)
@@ -168,7 +152,7 @@ def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: Displ
     nodes = cls.nodes_of(Role.EDGE, edge.index)
     if edge.degenerate or not len(nodes):
         return np.zeros(0), np.zeros(0)
-    return cls.t[nodes], edge_distances(morph.curve, cls.foot[nodes] + field.displacements[nodes], cls.t[nodes])
+    return cls.t[nodes], curve_distances(morph.curve, cls.foot[nodes] + field.displacements[nodes], cls.t[nodes])
 
 
 def node_residuals(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField) -> np.ndarray:
