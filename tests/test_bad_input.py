@@ -594,10 +594,25 @@ def test_interrupt_while_the_step_is_written(box, out, capsys, monkeypatch, with
     assert _left(out.parent) == (["r.json"] if with_report else [])
 
 
+#: ``python -m hot2cold`` whose classification first waits a minute: the box's whole morph after its load takes
+#: about 2 s, and on a loaded machine a SIGINT sent on the "load" line once came after it had finished (exit 0).
+_SLOW_CLASSIFY = """
+import runpy, time
+import hot2cold.pipeline.morph as morph
+classify = morph.classify_nodes
+def slow(*args, **kwargs):
+    time.sleep(60)
+    return classify(*args, **kwargs)
+morph.classify_nodes = slow
+runpy.run_module("hot2cold", run_name="__main__")
+"""
+
+
 def test_ctrl_c_in_a_running_morph(tmp_path, box):
-    """A real SIGINT during the morph of the console script: exit 130, one line, no file left."""
+    """A real SIGINT during the morph of the console script (its classification held up, so the signal comes
+    while the morph runs however loaded the machine): exit 130, one line, no file left."""
     out = tmp_path / "cold.step"
-    proc = subprocess.Popen([sys.executable, "-m", "hot2cold", "morph", str(box[0]), str(box[2]), "-o", str(out)],
+    proc = subprocess.Popen([sys.executable, "-c", _SLOW_CLASSIFY, "morph", str(box[0]), str(box[2]), "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stderr.readline()                # "load: done": the morph is under way

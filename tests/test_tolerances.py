@@ -1,12 +1,15 @@
-"""The cold part's tolerances state the true gaps between its edges and faces (kernel.tolerances)."""
+"""The kernel's measures of a part: tolerances that state the true gaps between edges and faces
+(kernel.tolerances), volumes and areas (kernel.validity)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hot2cold.kernel.rebuild import rebuild
 from hot2cold.kernel.step import read_step, write_step
 from hot2cold.kernel.tolerances import fit_tolerances
-from hot2cold.kernel.validity import check_solids
+from hot2cold.kernel.tessellate import tessellate
+from hot2cold.kernel.validity import check_solids, face_areas, volume
 from hot2cold.pipeline.load import load_part
 from hot2cold.settings import Settings
 
@@ -46,3 +49,34 @@ def test_curves_on_a_face_whose_parameters_slid_are_projected_again(tmp_path):
     back = check_solids(read_step(tmp_path / "cold.step"))
     assert len(back) == 1 and back[0].valid and back[0].closed
     np.testing.assert_allclose(back[0].volume, 1000.0, rtol=1e-9)
+
+
+def _lofted_blade():
+    """Three spline sections (12 points each, 80 mm apart, twisted by 50 degrees and tapered) lofted into a
+    smooth blade, as a CAD system's loft gives it."""
+    import cadquery as cq
+
+    def section(z, twist, scale):
+        t = np.linspace(0, 2 * np.pi, 13)[:-1]
+        x, y = 30 * scale * np.cos(t), 4 * scale * np.sin(t) + 3 * scale * np.cos(t) ** 2
+        c, s = np.cos(np.radians(twist)), np.sin(np.radians(twist))
+        pts = [cq.Vector(c * a - s * b, s * a + c * b, z) for a, b in zip(x, y)]
+        return cq.Wire.assembleEdges([cq.Edge.makeSpline(pts + [pts[0]])])
+
+    return cq.Solid.makeLoft([section(0, 0, 1.0), section(40, 25, 0.8), section(80, 50, 0.6)]).wrapped
+
+
+def test_volume_and_areas_agree_with_a_fine_triangulation():
+    """The kernel's default Gauss rule gave 15 441 mm³ for this blade of 19 690 mm³ (-22 %); the volume and
+    the face areas the checks and the report use agree with a triangulation to 1 um to 1e-4 (5e-5 measured)."""
+    shape = _lofted_blade()
+    mesh = tessellate(shape, 1e-3)
+    v = mesh.vertices[mesh.triangles]
+    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    mesh_volume = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
+    assert volume(shape) == pytest.approx(mesh_volume, rel=1e-4)
+    assert 19_600 < volume(shape) < 19_800
+    from hot2cold.kernel.topology import shape_map
+    from OCP.TopAbs import TopAbs_FACE
+    areas = face_areas(shape_map(shape, TopAbs_FACE))
+    assert areas.sum() == pytest.approx(0.5 * np.linalg.norm(cross, axis=1).sum(), rel=1e-4)

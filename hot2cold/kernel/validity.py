@@ -58,19 +58,25 @@ def free_edges(shape) -> int:
                if count[i] == 1 and not BRep_Tool.Degenerated_s(TopoDS.Edge_s(edges.FindKey(i))))
 
 
+#: Relative accuracy asked of the kernel's adaptive integration of volumes and areas (``BRepGProp`` with an
+#: ``Eps``).  Its default fixed Gauss rule is far off on spline solids: 15 441 mm³ for a lofted three-section
+#: blade of 19 690 mm³ (-22 %; a fine triangulation gives 19 690.0), 4 033 756 mm³ for the vise's 4 032 973.
+GPROP_EPS = 1e-6
+
+
 def volume(shape) -> float:
-    """Volume of ``shape`` in mm^3."""
+    """Volume of ``shape`` in mm^3, to :data:`GPROP_EPS` (relative)."""
     props = GProp_GProps()
-    BRepGProp.VolumeProperties_s(shape, props)
+    BRepGProp.VolumeProperties_s(shape, props, GPROP_EPS)
     return float(props.Mass())
 
 
 def face_areas(faces) -> np.ndarray:
-    """Areas ``(n,)`` in mm^2 of the faces ``faces`` (trimmed)."""
+    """Areas ``(n,)`` in mm^2 of the faces ``faces`` (trimmed), to :data:`GPROP_EPS` (relative)."""
     areas = np.empty(len(faces))
     for k, face in enumerate(faces):
         props = GProp_GProps()
-        BRepGProp.SurfaceProperties_s(face, props)
+        BRepGProp.SurfaceProperties_s(face, props, GPROP_EPS)
         areas[k] = props.Mass()
     return areas
 
