@@ -612,8 +612,12 @@ def test_ctrl_c_in_a_running_morph(tmp_path, box):
     """A real SIGINT during the morph of the console script (its classification held up, so the signal comes
     while the morph runs however loaded the machine): exit 130, one line, no file left."""
     out = tmp_path / "cold.step"
+    # A terminal's Ctrl-C reaches a process whose SIGINT is handled; a shell's background job (a CI step run
+    # with &) starts its children with SIGINT ignored, which Python then leaves ignored: reset it, as a
+    # terminal would have it.
     proc = subprocess.Popen([sys.executable, "-c", _SLOW_CLASSIFY, "morph", str(box[0]), str(box[2]), "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         line = proc.stderr.readline()                # "load: done": the morph is under way
         assert line.startswith("load"), line
