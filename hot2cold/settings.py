@@ -33,7 +33,8 @@ class Settings:
         Relative default of ``edge_distance``.
     svd_epsilon : float
         The machine-precision factor of the truncated SVD cut-off: singular values below
-        ``sigma_1 * (s - 1) * svd_epsilon`` are dropped (eq. 20; the paper uses FLT_EPSILON).
+        ``sigma_1 * n * svd_epsilon`` are dropped, ``n`` the unknowns (eq. 20 with the paper's FLT_EPSILON,
+        but the paper's ``s - 1`` rows made the rank depend on the node count: :mod:`hot2cold.core.lstsq`).
     vertex_neighbours : int
         How many nearest foot points estimate a vertex displacement by a local least-squares fit when no
         node sits on the vertex.
