@@ -68,15 +68,18 @@ def test_edge_morph_of_a_high_degree_span_with_its_nodes_bunched_at_one_end():
     ends = _quadratic_field(curve.poles[[0, -1]])
     samples = evaluate_curve(curve, np.linspace(*curve.domain, 400))
     estimator = FieldEstimator(samples, _quadratic_field(samples))
-    result = morph_edge(curve, t, _quadratic_field(hot), ends, estimator, 1.2e-7, artificial_weight=0.1)
-    assert result.artificial > 0 and result.rank < result.unknowns
     dense = np.linspace(*curve.domain, 2001)
     on = evaluate_curve(curve, dense)
-    off = np.linalg.norm(evaluate_curve(result.curve, dense) - on - _quadratic_field(on), axis=1)
     basis = curve_basis(curve, dense).toarray()
     best = np.linalg.lstsq(basis, _quadratic_field(on), rcond=None)[0]
     best_off = np.linalg.norm(basis @ best - _quadratic_field(on), axis=1)
-    assert off.max() <= 2.0 * best_off.max(), (off.max(), best_off.max())
+    # the default cut-off keeps every pole (condition 9e4); a coarse one (1e-3) drops 8 of 15 directions, which
+    # then keep the estimate fitted along the curve (0.7 x the best; with the estimate at the poles, 6.6 x)
+    for epsilon, full in ((1.2e-7, True), (1e-3, False)):
+        result = morph_edge(curve, t, _quadratic_field(hot), ends, estimator, epsilon, artificial_weight=0.1)
+        assert result.artificial > 0 and (result.rank == result.unknowns) == full
+        off = np.linalg.norm(evaluate_curve(result.curve, dense) - on - _quadratic_field(on), axis=1)
+        assert off.max() <= 2.0 * best_off.max(), (epsilon, off.max(), best_off.max())
 
 
 def test_field_estimator_is_exact_for_affine_fields_and_extrapolates():
