@@ -128,9 +128,9 @@ def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
     ``(p + 1)(q + 1)`` of the data parameters ``uv`` takes all of its candidates: the paper puts one node at
     the centre of an empty patch, but one node cannot fix the ``(p + 1)(q + 1)`` coefficients of a patch's
     polynomial piece.  Elsewhere a candidate is taken where its cell holds no data: nodes bunched in one end
-    of a patch leave the polynomial piece free at the other (Rotor 67's degree-14 blade face: 207 nodes in
-    its last span, 193 of them in the first fifth; the rest of the span swung 0.07 mm off under a field of
-    0.008 mm), and where ``trimmed_away(uv) -> (m,) bool`` puts it outside the face's trimmed domain, so the
+    of a patch leave the polynomial piece free at the other (as on Rotor 67's degree-14 hub and casing edges,
+    :func:`hot2cold.pipeline.edge_fit._artificial_parameters`, whose error its blade faces took through their
+    tied side rows: 0.07 mm under a field of 0.008 mm), and where ``trimmed_away(uv) -> (m,) bool`` puts it outside the face's trimmed domain, so the
     surface follows the field's continuation there instead of wandering.
 
     The points on the sides hold the outermost strip of the untrimmed surface: without them the last row of
@@ -170,8 +170,9 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
 
     The face fit's truncated SVD keeps this in the directions it drops.  The estimate at the poles
     themselves would do for an affine field only: a high-degree surface's poles lie far off it (Rotor 67's
-    degree-14 blade face: 500 to 780 mm), where the local estimate of a curved field is no estimate of what
-    those poles need (0.4 mm against 0.05 mm; the face swung 0.07 mm off under a field of 0.008 mm).
+    degree-14 blade face: 500 to 780 mm in its last span), where the local estimate of a curved field is no
+    estimate of what those poles need (0.4 mm there against the 0.05 mm of the best fit).  The same held for
+    its edges (:func:`hot2cold.pipeline.edge_fit._field_prior`), where it cost 0.07 mm.
     """
     p, q = surface.u_degree, surface.v_degree
     nu, nv = surface.shape
