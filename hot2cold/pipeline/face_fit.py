@@ -130,8 +130,9 @@ def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
     polynomial piece.  Elsewhere a candidate is taken where its cell holds no data: nodes bunched in one end
     of a patch leave the polynomial piece free at the other (as on Rotor 67's degree-14 hub and casing edges,
     :func:`hot2cold.pipeline.edge_fit._artificial_parameters`, whose error its blade faces took through their
-    tied side rows: 0.07 mm under a field of 0.008 mm), and where ``trimmed_away(uv) -> (m,) bool`` puts it outside the face's trimmed domain, so the
-    surface follows the field's continuation there instead of wandering.
+    tied side rows: 0.07 mm under a field of 0.008 mm), and where ``trimmed_away(uv) -> (m,) bool`` puts it
+    outside the face's trimmed domain, so the surface follows the field's continuation there instead of
+    wandering.
 
     The points on the sides hold the outermost strip of the untrimmed surface: without them the last row of
     poles of a trimmed side is fixed only by extrapolating the polynomial piece from the cell centres inside
