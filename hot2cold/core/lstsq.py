@@ -257,7 +257,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
     if s == 0 or n == 0:
         x = np.zeros((n, k))
         if prior is not None and n:
-            x = _checked_prior(prior() if callable(prior) else prior, A.shape, b.shape).reshape(n, k).copy()
+            x = _checked_prior(prior, A.shape, b.shape).reshape(n, k).copy()
         return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
     if s > n:
@@ -278,7 +278,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
     x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
     if prior is not None and rank < n:
-        x0 = _checked_prior(prior() if callable(prior) else prior, A.shape, b.shape).reshape(n, k)
+        x0 = _checked_prior(prior, A.shape, b.shape).reshape(n, k)
         x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
     condition = float(sigma[0] / sigma[rank - 1]) if rank else float("nan")
     return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
@@ -287,8 +287,9 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
 
 
 def _checked_prior(prior, a_shape: tuple[int, int], b_shape: tuple[int, ...]) -> np.ndarray:
-    """``prior`` as a float array of shape ``(n,) + b_shape[1:]`` for ``A`` of ``a_shape``, or ValueError."""
-    x0 = np.asarray(prior, dtype=float)
+    """``prior`` (an array, or a callable returning one, called here) as a float array of shape
+    ``(n,) + b_shape[1:]`` for ``A`` of ``a_shape``, or ValueError."""
+    x0 = np.asarray(prior() if callable(prior) else prior, dtype=float)
     n = a_shape[1]
     if x0.shape != (n,) + tuple(b_shape[1:]):
         raise ValueError(f"A is {a_shape} and B {b_shape}, so prior must be {(n,) + tuple(b_shape[1:])}, "
