@@ -435,6 +435,13 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     return out
 
 
+def knot_breaks(knots: np.ndarray, degree: int) -> np.ndarray:
+    """The distinct knots ``(spans + 1,)`` of the domain of a degree-``degree`` spline on the full knot vector
+    ``knots``: the ends of its knot spans."""
+    knots = np.asarray(knots, float)
+    return np.unique(knots[degree:len(knots) - degree])
+
+
 def span_cells(breaks: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The cells of a parameter direction and a candidate point in each (for artificial nodes, eq. 39).
 

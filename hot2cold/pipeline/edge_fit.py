@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
-from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve, span_cells
+from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve, knot_breaks, span_cells
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
 from ..core.model import Classification, Edge, Part, Role
@@ -84,7 +84,7 @@ def _artificial_parameters(curve: BSplineCurve, t: np.ndarray) -> np.ndarray:
     nodes (an empty span is the paper's case, a span with a node or two is the same problem on thin
     faces such as a trailing edge), and nodes bunched in one end of a span leave the other end free.
     """
-    breaks = np.unique(curve.knots[curve.degree:curve.n_poles + 1])
+    breaks = knot_breaks(curve.knots, curve.degree)
     candidates, span, cell, edges = span_cells(breaks, curve.degree)
     candidates, span, cell = candidates[1:-1], span[1:-1], cell[1:-1]      # the ends are the vertices'
     counts = np.histogram(t, bins=breaks)[0]
@@ -98,7 +98,7 @@ def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEsti
     of :func:`_artificial_parameters` and at the ends.  The truncated SVD keeps this in the directions it drops
     (the estimate at the poles themselves is one for an affine field only: see
     :func:`hot2cold.pipeline.face_fit._field_prior`)."""
-    t = span_cells(np.unique(curve.knots[curve.degree:curve.n_poles + 1]), curve.degree)[0]
+    t = span_cells(knot_breaks(curve.knots, curve.degree), curve.degree)[0]
     basis = curve_basis(curve, t).toarray()
     rhs = estimator(evaluate_curve(curve, t)) - basis[:, [0, -1]] @ end_disp
     return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=estimator(curve.poles[1:-1])).x

@@ -27,7 +27,8 @@ from typing import Callable
 import numpy as np
 
 from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
-from ..core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, span_cells, surface_basis
+from ..core.bspline import (BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks, span_cells,
+                            surface_basis)
 from .edge_fit import EdgeMorph
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
@@ -141,9 +142,8 @@ def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
     eq. 20), against 1.2 to 2.4 degrees with them (the field itself turns them by up to 1.5 degrees).
     """
     p, q = surface.u_degree, surface.v_degree
-    nu, nv = surface.shape
-    ub = np.unique(surface.u_knots[p:nu + 1])
-    vb = np.unique(surface.v_knots[q:nv + 1])
+    ub = knot_breaks(surface.u_knots, p)
+    vb = knot_breaks(surface.v_knots, q)
     tu, ru, cu, eu = span_cells(ub, p)
     tv, rv, cv, ev = span_cells(vb, q)
     if len(uv):
@@ -176,9 +176,8 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
     its edges (:func:`hot2cold.pipeline.edge_fit._field_prior`), where it cost 0.07 mm.
     """
     p, q = surface.u_degree, surface.v_degree
-    nu, nv = surface.shape
-    tu = span_cells(np.unique(surface.u_knots[p:nu + 1]), p)[0]
-    tv = span_cells(np.unique(surface.v_knots[q:nv + 1]), q)[0]
+    tu = span_cells(knot_breaks(surface.u_knots, p), p)[0]
+    tv = span_cells(knot_breaks(surface.v_knots, q), q)[0]
     u, v = (a.ravel() for a in np.meshgrid(tu, tv, indexing="ij"))
     basis = surface_basis(surface, u, v)
     flat = delta.reshape(-1, 3)

@@ -37,7 +37,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_surface, refine_curve,
+from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_surface, knot_breaks, refine_curve,
                             refine_surface, surface_derivatives)
 from ..core.footpoint import curve_distances
 from .edge_fit import EdgeMorph
@@ -268,10 +268,6 @@ def _knots_degree(part: Part, member: Member) -> tuple[np.ndarray, int]:
     return (surface.u_knots, surface.u_degree) if member.axis == 0 else (surface.v_knots, surface.v_degree)
 
 
-def _breaks(knots: np.ndarray, degree: int) -> np.ndarray:
-    return np.unique(knots[degree:len(knots) - degree])
-
-
 def _spans(breaks: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
 
@@ -283,7 +279,7 @@ def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray) -> tuple[np
     nodes would decide it, :func:`hot2cold.pipeline.edge_fit.morph_edge`), so it is not made any finer."""
     degree = max(curve.degree, REFINED_DEGREE)
     need = degree + 1
-    breaks = _breaks(curve.knots, curve.degree)
+    breaks = knot_breaks(curve.knots, curve.degree)
     spans = _spans(breaks, t)
     mids, up = [], curve.degree < REFINED_DEGREE
     for r in np.unique(spans[bad]):
@@ -303,7 +299,7 @@ def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray) -> lis
     FE nodes the tolerance is about, so they are not made any finer."""
     degrees = (surface.u_degree, surface.v_degree)
     need = int(np.prod([max(d, REFINED_DEGREE) + 1 for d in degrees]))
-    breaks = [_breaks(surface.u_knots, degrees[0]), _breaks(surface.v_knots, degrees[1])]
+    breaks = [knot_breaks(surface.u_knots, degrees[0]), knot_breaks(surface.v_knots, degrees[1])]
     spans = np.column_stack([_spans(breaks[0], uv[:, 0]), _spans(breaks[1], uv[:, 1])])
     out = []
     for axis in (0, 1):
