@@ -260,8 +260,9 @@ def one_line(text: str) -> str:
     return lines[-1] if lines else ""
 
 
-def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path) -> Run:
-    """One run in this process (the child's work): nodes, field, morph by the command line, checks."""
+def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_args: tuple = ()) -> Run:
+    """One run in this process (the child's work): nodes, field, morph by the command line (with the extra
+    options ``morph_args``), checks."""
     from hot2cold.cli import main as cli_main
     from hot2cold.kernel.step import read_step
     from hot2cold.kernel.topology import diagonal
@@ -285,7 +286,7 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path) -> Run
     start = time.perf_counter()
     with contextlib.redirect_stderr(stderr):
         run.exit_code = cli_main(["morph", str(path), str(field_path), "-o", str(cold_path), "--report",
-                                  str(report_path), "-q"])
+                                  str(report_path), "-q", *morph_args])
     run.seconds = time.perf_counter() - start
     run.peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     run.message = one_line(stderr.getvalue()).replace(f"{workdir}{os.sep}", "")
@@ -313,13 +314,14 @@ def load(data: dict) -> Run:
     return Run(**{k: v for k, v in data.items() if k in Run.__dataclass_fields__})
 
 
-def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_memory_gb: float | None) -> Run:
+def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_memory_gb: float | None,
+              morph_args: tuple = ()) -> Run:
     """:func:`run_here` in a fresh process; a timeout, a crash or a memory limit is recorded, not raised."""
     with tempfile.TemporaryDirectory(prefix="real_parts_") as tmp:
         tmp = Path(tmp)
         out = tmp / "run.json"
         cmd = [sys.executable, __file__, "--one", str(path), "--nodes", nodes_kind, "--fields", field_name,
-               "--workdir", str(tmp), "--json", str(out)]
+               "--workdir", str(tmp), "--json", str(out), f"--morph-args={' '.join(morph_args)}"]
 
         def limit():
             os.setsid()
@@ -413,9 +415,12 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, help="save the runs here")
     parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
                         help="print the scoreboard of runs saved with --json (several files: joined), run nothing")
+    parser.add_argument("--morph-args", default="", metavar="ARGS",
+                        help="extra options of every morph, one string (e.g. --morph-args='--keep-knots')")
     parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)          # child: one run
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    morph_args = tuple(args.morph_args.split())
     fields = [f for f in args.fields.split(",") if f]
     kinds = [n for n in args.nodes.split(",") if n]
     for f in fields:
@@ -430,7 +435,7 @@ def main(argv=None) -> int:
         print(scoreboard(runs))
         return 0
     if args.one is not None:
-        run = run_here(args.one, kinds[0], fields[0], args.workdir)
+        run = run_here(args.one, kinds[0], fields[0], args.workdir, morph_args)
         args.json.write_text(json.dumps(asdict(run)))
         return 0
 
@@ -441,7 +446,7 @@ def main(argv=None) -> int:
     for path in paths:
         for kind in kinds:
             for name in fields:
-                run = run_child(path, kind, name, args.timeout, args.max_memory or None)
+                run = run_child(path, kind, name, args.timeout, args.max_memory or None, morph_args)
                 runs.append(run)
                 print(f"{run.part} {kind} {name}: exit {run.exit_code} {_num(run.seconds, '.1f')} s "
                       f"exact {_num(run.exact_max, '.2e')} {run.message}", flush=True)
