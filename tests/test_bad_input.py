@@ -636,27 +636,37 @@ def _bending(nodes: np.ndarray, c: float = 0.004) -> np.ndarray:
 
 
 def test_a_field_the_faces_cannot_follow_is_reported_between_the_nodes(tmp_path, box, out, capsys):
-    """The box's faces are bilinear patches between straight edges: under a field that bends them they stay
-    flat, the top and bottom faces 0.1 mm (the whole displacement) off it in their middle, between the nodes.
-    The report says so per face; the part is written (it is inaccurate, not wrong)."""
+    """The box's faces are bilinear patches between straight edges: with their knots kept (``--keep-knots``)
+    they stay flat under a field that bends them, the top and bottom faces 0.1 mm (the whole displacement)
+    off it in their middle, between the nodes.  The report says so per face; the part is written (it is
+    inaccurate, not wrong) with exit code 5, the tolerance missed.  By default the faces are refined and
+    follow the field."""
     field = _write_field(tmp_path / "bend.csv", box[1], _bending(box[1]))
     report = tmp_path / "report.json"
-    assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
+    assert main(_morph(box[0], field, out, "--report", str(report), "-q", "--keep-knots")) == 5
+    assert capsys.readouterr().err.startswith("hot2cold: tolerance 0.001 mm not met (Δmax 0.")
     data = json.loads(report.read_text())
     between = sorted(f["delta_between"] for f in data["faces"])
     assert between[-1] == pytest.approx(0.1, abs=2e-3)
     assert data["delta_between"] == between[-1]
     assert data["max_displacement"] == pytest.approx(0.1, abs=1e-3)
+    assert data["keep_knots"] and not data["refinements"]
+
+    assert main(_morph(box[0], field, out, "--report", str(report), "-q")) == 0
+    data = json.loads(report.read_text())
+    assert data["delta_between"] < 1e-3 and data["delta_max"] < 1e-3 and data["tolerance_met"]
+    assert {r["face"] for r in data["refinements"]} >= {f["index"] for f in data["faces"] if f["nodes"]}
 
 
 def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, capsys, monkeypatch):
     """A face more than twice the field's largest displacement from the field's local estimate somewhere on
     it is refused.  An honest morph of the box does not get there (the check guards against a fit gone
-    wrong), so the bound is cut to a tenth of the displacement, which the bent box's flat faces miss."""
+    wrong), so the bound is cut to a tenth of the displacement, which the bent box's flat faces miss with
+    their knots kept."""
     from hot2cold.pipeline import checks
     monkeypatch.setattr(checks, "_BETWEEN_MARGIN", 0.1)
     field = _write_field(tmp_path / "bend.csv", box[1], _bending(box[1]))
-    _refused(capsys, _morph(box[0], field, out), 4,
+    _refused(capsys, _morph(box[0], field, out, "--keep-knots"), 4,
              r"cold solid 0 leaves the field between the nodes: face \d is 0\.\d+ mm from where the field's local "
              r"estimate puts it near \(.*\) mm, more than 0\.1 x the field's largest displacement \(0\.1 mm\)", out)
 
@@ -671,15 +681,16 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.validity import check_solids
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FieldScale, check_cold
+    from hot2cold.pipeline.checks import FieldScale, check_cold, face_grids
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
     part, cls = result.part, result.classification
     used = cls.used
     estimator = FieldEstimator(cls.foot[used], result.field.displacements[used])
-    args = (Projector(part.kernel.faces, part.kernel.edges), check_solids(part.kernel.hot),
-            check_solids(result.cold_kernel.shape), FieldScale.of(cls, result.field), estimator)
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    args = (projector, check_solids(part.kernel.hot), check_solids(result.cold_kernel.shape),
+            FieldScale.of(cls, result.field), face_grids(part, projector, cls, result.field, estimator, 20))
     fine = check_cold(part, result.cold_kernel, result.faces, *args)
     assert fine.problems == {}
     assert np.nanmax(fine.between) < 1e-9

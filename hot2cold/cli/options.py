@@ -135,12 +135,17 @@ class MorphOptions:
         help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
     tolerance: float | None = _option(
         None, flag="--tolerance", convert=to_number, type=float, metavar="MM",
-        help="largest accepted error (Δmax of every face and edge): where it is missed, faces and edges are "
-        "refined (knot insertion, degree raised to cubic; the hot shape is kept) and fitted again; exit code 5 "
-        "when it still is not met")
+        help="largest accepted error, at the nodes and between them (default 0.001, the paper's aerofoil "
+        "accuracy; widened by the field's own scatter): where it is missed, faces and edges are refined (knot "
+        "insertion, degree raised to cubic; the hot shape is kept) and fitted again; exit code 5 when it "
+        "still is not met")
+    keep_knots: bool = _option(
+        False, flag="--keep-knots", convert=to_flag,
+        help="keep every degree and knot vector of the hot part (the paper's strict mode): nothing is refined; "
+        "the tolerance is still checked (exit code 5 when it is not met)")
     max_refinements: int | None = _option(
         None, flag="--max-refinements", convert=to_count, type=int, metavar="N",
-        help="rounds of refinement for --tolerance at the most (default 4)")
+        help="rounds of refinement to the tolerance at the most (default 4)")
     node_distance: float | None = _option(
         None, flag="--node-distance", convert=to_number, type=float, metavar="MM",
         help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
@@ -190,8 +195,10 @@ class MorphOptions:
             given = {name: value for name, value in (("max_refinements", self.max_refinements),
                                                       ("max_displacement_rel", self.max_displacement_rel))
                      if value is not None}
+            if self.tolerance is not None:
+                given["tolerance"] = self.tolerance
             return Settings(node_distance=self.node_distance, edge_distance=self.edge_distance,
-                            tolerance=self.tolerance, extrapolate=self.extrapolate, **given)
+                            keep_knots=self.keep_knots, extrapolate=self.extrapolate, **given)
         except ValueError as exc:
             raise InputError(str(exc)) from exc
 

@@ -47,9 +47,11 @@ def write_cold(result, output: str | os.PathLike, report: str | os.PathLike | No
 
 
 def tolerance_missed(result) -> str | None:
-    """The one-line message when the morph's ``--tolerance`` was not met, else None."""
+    """The one-line message when the morph's tolerance (``--tolerance``, default 1e-3 mm) was not met, else
+    None."""
     report = result.report
     if report.tolerance_met is not False:
         return None
-    return (f"tolerance {report.tolerance} mm not met (Δmax {report.delta_max:.3g} mm); "
-            f"the cold part is written")
+    noise = f" + {report.allowance:.3g} mm for the field's scatter" if report.allowance > 0 else ""
+    return (f"tolerance {report.tolerance:g} mm{noise} not met (Δmax {report.delta_max:.3g} mm; the report "
+            f"says where); the cold part is written")

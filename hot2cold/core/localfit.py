@@ -1,13 +1,15 @@
 """Local least-squares polynomials of a vector field over neighbourhoods of points (numpy and scipy only).
 
-Two uses share the monomials, the scaling of the offsets and the linear least squares here:
+Three uses share the monomials, the scaling of the offsets and the linear least squares here:
 
 * :func:`node_fits` (for :mod:`hot2cold.pipeline.invert`): per node, the coefficients of a quadratic (or,
   where the neighbours do not determine one, linear) fit over its nearest nodes, in offsets from the node,
   evaluated later anywhere near it by :func:`evaluate_node_fits`;
 * :func:`fits_at` (for :mod:`hot2cold.pipeline.artificial`, in place of the paper's barycentric rule,
   eq. 40-53): the value at a point of a linear fit over a neighbourhood, in offsets from its centroid, plus a
-  quadratic correction and the trust in it.
+  quadratic correction and the trust in it;
+* :func:`scatter` (for the tolerance of :mod:`hot2cold.pipeline.refine`): how far a field's nodes scatter about
+  a smooth field, from leave-one-out predictions of quadratics in the surface's tangent plane.
 
 The monomials, numbered from 0, are ``1, x, y, z`` (degree 1) and then ``x x, y y, z z, x y, x z, y z``
 (degree 2).  Offsets are scaled by each neighbourhood's largest offset component, so the columns are of order
@@ -143,3 +145,59 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     left = np.sqrt(np.maximum(before - (projected ** 2).sum(axis=(1, 2)), 0.0) / np.maximum(before, 1e-300))
     trust = np.clip(np.log(UNTRUSTED / np.maximum(left, 1e-300)) / np.log(UNTRUSTED / TRUSTED), 0.0, 1.0)
     return out, np.einsum("cj,cjk->ck", gain, projected), trust
+
+
+#: The median of the chi-square distribution with 3 degrees of freedom: ``|r|^2 / sigma^2`` of a vector ``r``
+#: of three independent normal components with standard deviation ``sigma`` is below it half of the time.
+_CHI2_3_MEDIAN = 2.365974
+
+
+def scatter(points: np.ndarray, values: np.ndarray, groups: list[np.ndarray] | None = None,
+            neighbours: int = 20, samples: int = 4000, seed: int = 0) -> float:
+    """The standard deviation (per component, same unit as ``values``) with which the field ``values (N, 3)``
+    at ``points (N, 3)`` on a surface scatters about a smooth field: 0 for a smooth field, sigma for one with
+    independent normal noise of standard deviation sigma on each component.
+
+    ``groups`` are index arrays of points on one smooth piece of surface each (the nodes of one face: a
+    neighbourhood that reached across a thin wall would see the field's change through the wall as scatter);
+    None: all points are one group.  In each group of more than ``neighbours`` points, at a seeded random
+    share of ``samples`` of them, the value is predicted from the ``neighbours`` nearest other points of the
+    group by a least-squares quadratic in the two directions of their tangent plane (the two largest
+    principal directions of their offsets), leaving the point itself out.  A smooth field is a smooth function
+    of the surface's coordinates, so the prediction misses it only by its third-order terms over the
+    neighbourhood; noise it misses by the point's own noise plus the prediction's, ``r = e_0 - a . e``, whose
+    variance is ``sigma^2 (1 + |a|^2)`` per component with ``a`` the prediction's weights.  The estimate is the
+    median of ``|r|^2 / (1 + |a|^2)`` over the points, divided by the median of a chi-square with three degrees
+    of freedom: robust to the points where the field has a kink (a clamped root) or the surface a crease, as
+    long as those are fewer than half.  0 when no group has more than ``neighbours`` points.
+    """
+    points = np.asarray(points, float)
+    values = np.asarray(values, float)
+    if points.ndim != 2 or points.shape[1] != 3 or values.shape != points.shape:
+        raise ValueError(f"points and values must both be (N, 3), got {points.shape} and {values.shape}")
+    if groups is None:
+        groups = [np.arange(len(points))]
+    groups = [np.asarray(g, int) for g in groups if len(g) > neighbours]
+    total = sum(len(g) for g in groups)
+    if not total:
+        return 0.0
+    rng = np.random.default_rng(seed)
+    z = [_left_out(points[g], values[g], rng.choice(len(g), size=max(1, min(len(g), samples * len(g) // total)),
+                                                    replace=False), neighbours) for g in groups]
+    return float(np.sqrt(np.median(np.concatenate(z)) / _CHI2_3_MEDIAN))
+
+
+def _left_out(points: np.ndarray, values: np.ndarray, at: np.ndarray, neighbours: int) -> np.ndarray:
+    """``|r|^2 / (1 + |a|^2)`` ``(c,)`` of :func:`scatter` at the points ``at (c,)`` of ``points (n, 3)``."""
+    _, idx = cKDTree(points).query(points[at], k=neighbours + 1)
+    idx = idx[:, 1:]                                                            # the point itself left out
+    offsets = points[idx] - points[at][:, None, :]                              # (c, k, 3)
+    centred = offsets - offsets.mean(axis=1, keepdims=True)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)                      # (c, 3, 3)
+    st = np.einsum("ckj,caj->cka", offsets, vt[:, :2])                          # (c, k, 2), the point at 0
+    st = st / np.maximum(np.abs(st).max(axis=(1, 2)), 1e-300)[:, None, None]
+    s, t = st[..., 0], st[..., 1]
+    features = np.stack([np.ones_like(s), s, t, s * s, s * t, t * t], axis=-1)  # (c, k, 6)
+    weights = np.linalg.pinv(features, rcond=NODE_RCOND)[:, 0, :]              # (c, k): the value at the point
+    r = values[at] - np.einsum("ck,ckj->cj", weights, values[idx])
+    return np.sum(r * r, axis=1) / (1.0 + np.sum(weights * weights, axis=1))

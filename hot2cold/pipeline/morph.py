@@ -26,7 +26,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, FieldEstimator, carry_to_feet
-from .checks import FieldScale, check_cold, check_coverage, check_hot, check_result
+from .checks import FieldScale, check_cold, check_coverage, check_hot, check_result, face_grids
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
@@ -42,8 +42,9 @@ from ..kernel.shapes import to_cadquery
 from ..kernel.step import write_step
 from .load import load_part
 from ..core.domain import Trim
+from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
-from .refine import refine
+from .refine import Targets, noise_allowance, refine
 from .report import Checks, Fits, Report, build_report, node_errors
 from ..settings import Settings
 
@@ -349,12 +350,20 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.progress("faces", done, total))
     stages.lap("faces")
 
-    # refinement to a tolerance (opt-in, beyond the paper): knots and cubic degree where the error misses it;
-    # from here on the context's part is the refined hot part (same shape)
+    # refinement to the tolerance (beyond the paper; not with keep_knots): knots and cubic degree where the
+    # error at the nodes or between them misses it; from here on the context's part is the refined hot part
+    # (same shape, same parameters: the grids over the faces stay valid)
+    grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours)
+    noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
+    allowance = noise_allowance(noise, int(cls.used.sum()))
+    if noise > 0.1 * (settings.tolerance or np.inf):
+        log.info("the field scatters by %.3g mm about a smooth field (per component): the tolerance at the "
+                 "nodes is widened by %.3g mm", noise, allowance)
     refinements, edge_refinements = (), ()
-    if settings.tolerance is not None:
-        refined = refine(context.part, cls, field, face_morphs, edge_morphs, settings.tolerance,
-                         settings.max_refinements, context.fit_face, context.refit_edges)
+    if settings.tolerance is not None and not settings.keep_knots:
+        targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids)
+        refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
+                         context.fit_face, context.refit_edges)
         context = replace(context, part=refined.part)
         face_morphs, edge_morphs = refined.faces, refined.edges
         refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
@@ -376,7 +385,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
-    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, context.estimator)
+    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, grids)
     problems = cold_check.problems
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
@@ -388,7 +397,8 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     stages.lap("report")
     report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-                          timings=stages.timings, inversion=None if inversion is None else asdict(inversion))
+                          timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
+                          scatter=noise, allowance=allowance)
     stages.progress("report")
     result = MorphResult(report=report, part=part, classification=cls, faces=face_morphs, edges=edge_morphs,
                          field=field, node_errors=errors, cold_kernel=cold,

@@ -3,13 +3,20 @@
 The paper keeps every knot vector.  Where a control net is too coarse for the field (a plane's 2x2 bilinear
 net under a temperature gradient, an edge with few poles), no choice of poles meets a tolerance.  Refining
 the net adds poles without changing the hot shape at all, so the morph is refined where its error is and
-fitted again, round after round, until every face's and edge's Δmax holds or ``Settings.max_refinements``
-rounds are done:
+fitted again, round after round, until every face's and edge's error is within the limit or
+``Settings.max_refinements`` rounds are done.  It is the default (``Settings.tolerance``, 1e-3 mm);
+``Settings.keep_knots`` keeps the paper's structure.
 
-* The error is the report's (eq. 21): the distance from each node's cold target point to the morphed face
-  or edge, found by Gauss-Newton from the node's own foot point (a local distance, never smaller than the
-  report's global one).
-* A knot span holding a point whose error exceeds the tolerance is halved (knot insertion).  A direction of
+* The limit is the tolerance plus what the field's scatter allows (:func:`noise_allowance`): a field with
+  noise (a few um of scatter, volume nodes beside the surface) cannot be met closer than its noise at its
+  nodes, and a refinement that tried would fit the noise and fold the face.
+* The errors (:class:`Targets`): at the nodes, the report's (eq. 21): the distance from each node's cold
+  target point to the morphed face or edge, found by Gauss-Newton from the node's own foot point (a local
+  distance, never smaller than the report's global one).  Between the nodes, on each face: the distance of
+  the field's local estimate at the points of a grid over the face that lie near nodes (where the nodes tell
+  the field), and of the face's cold edges at their pcurves' points.  A face with nodes only on its edges
+  (a narrow band, a small plane) is measured by these alone.
+* A knot span holding a point whose error exceeds the limit is halved (knot insertion).  A direction of
   degree below 3 is first raised to cubic (degree elevation): a bilinear plane refined by knots alone can
   only follow a curved field piecewise linearly, with an error that falls as the square of the span.
   Both keep the hot geometry exactly (to rounding; the operator is found by collocation at the Greville
@@ -20,13 +27,12 @@ rounds are done:
   and so on.  Every member of a class gets the same knots (in its own parameterisation, through the
   affine, possibly reversed, map between normalised parameters) and the same degree.  The two faces of an
   edge therefore go on sharing it pole for pole, and the cold solid stays watertight.
-* Refinement never makes a knot span finer than its nodes can determine: a span (an edge's) or patch (a
-  face's) holding a bad node is halved only if each half keeps at least ``degree + 1`` (a face:
-  ``(p + 1)(q + 1)``) FE nodes, the count below which :mod:`hot2cold.pipeline.edge_fit` and
-  :mod:`hot2cold.pipeline.face_fit` hand it to artificial nodes.  Finer spans would meet the tolerance at
-  the nodes by bending between them (more poles than data; the artificial nodes, local linear estimates of
-  the field, would decide the shape there).  A face or edge that misses where no span may be halved is
-  reported as not refinable.
+* Refinement never makes a knot span finer than its nodes can determine: a span is halved only while each
+  half stays :data:`MIN_SPAN_SPACINGS` node spacings long (the spacing of the nodes on and around the face or
+  edge).  Finer spans would meet the tolerance at the nodes by bending between them, with the artificial
+  nodes (local estimates of the field, :mod:`hot2cold.pipeline.artificial`) deciding the shape there.  Spans
+  between those lengths get artificial nodes in their empty cells, so every fit stays determined.  A face or
+  edge that misses where no span may be halved is reported as not refinable.
 """
 from __future__ import annotations
 
@@ -37,13 +43,16 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_surface, knot_breaks, refine_curve,
-                            refine_surface, surface_derivatives)
+from scipy.spatial import cKDTree
+
+from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
+                            refine_curve, refine_surface, surface_derivatives)
 from ..core.footpoint import curve_distances
+from ..core.model import Classification, Edge, Face, Part, Role, side_along
+from ..io.field import DisplacementField
+from .checks import FaceGrid
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
-from ..io.field import DisplacementField
-from ..core.model import Classification, Edge, Face, Part, Role, side_along
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +62,14 @@ REFINED_DEGREE = 3
 #: Gauss-Newton steps of the local projections.
 _NEWTON_STEPS = 8
 
+#: A knot span is halved only while each half stays at least this many node spacings long on the part: finer
+#: spans would be decided by the artificial nodes (the field's local estimate) rather than by the nodes.
+MIN_SPAN_SPACINGS = 1.0
+
+#: A point of a face's grid counts where the nodes tell the field (:class:`Targets`) when a node's foot point
+#: lies within this many node spacings of it.
+GRID_REACH = 2.0
+
 
 @dataclass(frozen=True)
 class Refinement:
@@ -60,9 +77,11 @@ class Refinement:
 
     ``missed``: the face missed the tolerance itself (a face may also be refined only because it shares a
     refined edge); ``delta_max_before``/``delta_max_after``: its largest error at its nodes before and after
-    (Gauss-Newton distances, see the module docstring); ``residual``: its largest fit residual
-    ``|S_cold(u_k, v_k) - d_k|`` at the nodes at the end; ``refinable`` is False when the face still misses
-    and its knot spans there hold too few nodes to be halved (see the module docstring).
+    (Gauss-Newton distances, see the module docstring); ``between_before``/``between_after``: its largest
+    error between the nodes (grid points near nodes against the field's local estimate, and its edges);
+    ``residual``: its largest fit residual ``|S_cold(u_k, v_k) - d_k|`` at the nodes at the end;
+    ``refinable`` is False when the face still misses and its knot spans there are already as short as the
+    nodes allow (:data:`MIN_SPAN_SPACINGS`).
     """
 
     face: int
@@ -78,6 +97,8 @@ class Refinement:
     delta_max_before: float
     delta_max_after: float
     residual: float
+    between_before: float = 0.0
+    between_after: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -141,11 +162,104 @@ def face_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, 
     return best
 
 
-def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField):
-    """Errors of a face at its nodes: ``(uv (m, 2), error (m,))``, the distances of eq. (21)."""
+@dataclass(frozen=True, eq=False)
+class Targets:
+    """Where the refinement measures each face and edge, besides the nodes (lengths in mm).
+
+    Attributes
+    ----------
+    limit : float, the error accepted: the tolerance plus what the field's scatter allows
+        (:func:`noise_allowance`).
+    face_spacing : (n_faces,) float array, the node spacing on and around each face (its own nodes and its
+        edges'); :data:`MIN_SPAN_SPACINGS` of it is the shortest half span a refinement makes.
+    edge_spacing : (n_edges,) float array, the same for each edge.
+    grids : list of :class:`~hot2cold.pipeline.checks.FaceGrid`, per face the grid points within
+        :data:`GRID_REACH` node spacings of a node, with the field's local estimate there: the error between
+        the nodes as far as the nodes tell (a face with nodes only on its edges has no other), less the
+        estimate's own miss at the nearest node (its ``slack``).
+    """
+
+    limit: float
+    face_spacing: np.ndarray
+    edge_spacing: np.ndarray
+    grids: list[FaceGrid]
+
+    @classmethod
+    def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid]) -> Targets:
+        """The targets of a classified field: node spacings (median distance from each used node's foot point
+        to the nearest other one, over the nodes of a face and its edges, or of an edge; the median over all
+        where there are none) and the grid points of ``grids`` near a node."""
+        used = np.flatnonzero(classification.used)
+        feet = np.unique(classification.foot[used], axis=0)
+        nearest = np.full(len(classification.used), np.nan)
+        if len(feet) > 1:
+            tree = cKDTree(feet)
+            nearest[used] = tree.query(classification.foot[used], k=2)[0][:, 1]
+        overall = float(np.nanmedian(nearest)) if np.isfinite(nearest).any() else np.inf
+
+        def median(nodes: np.ndarray) -> float:
+            values = nearest[nodes]
+            values = values[np.isfinite(values)]
+            return float(np.median(values)) if len(values) else overall
+
+        edge_spacing = np.array([median(classification.nodes_of(Role.EDGE, e.index)) for e in part.edges])
+        face_spacing = np.array([median(np.concatenate(
+            [classification.nodes_of(Role.FACE, f.index)]
+            + [classification.nodes_of(Role.EDGE, use.edge) for use in f.uses])) for f in part.faces])
+        near = []
+        for face, grid in zip(part.faces, grids):
+            if len(grid.uv) and len(feet) > 1:
+                keep = tree.query(grid.hot, distance_upper_bound=GRID_REACH * face_spacing[face.index])[0] < np.inf
+            else:
+                keep = np.zeros(len(grid.uv), bool)
+            near.append(grid.take(keep))
+        return cls(limit, face_spacing, edge_spacing, near)
+
+
+def noise_allowance(scatter: float, nodes: int) -> float:
+    """The error (mm) a node may show beyond the tolerance because the field scatters: the largest of
+    ``nodes`` normal distances drawn with standard deviation ``scatter`` (mm) is about ``scatter`` times the
+    normal quantile of ``1 - 1/(4 nodes)`` (4.06 for 10 000 nodes), and no fit of the signal comes closer to
+    the nodes than their noise."""
+    if scatter <= 0 or nodes <= 0:
+        return 0.0
+    from scipy.stats import norm
+
+    return float(scatter * norm.isf(0.25 / nodes))
+
+
+class FaceErrors(NamedTuple):
+    """A face's errors (mm) and where they are: at its nodes (eq. 21), and between them (its grid points near
+    nodes, and its edges' cold points).  ``uv`` and ``error`` hold all of them, for the marks; ``nodes`` and
+    ``between`` the largest of each kind (0 where there are none)."""
+
+    uv: np.ndarray
+    error: np.ndarray
+    nodes: float
+    between: float
+
+
+def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField, grid: FaceGrid,
+                 edge_morphs: list[EdgeMorph], edges: list[Edge]) -> FaceErrors:
+    """Errors of a face: the distances of eq. (21) at its nodes, of the field's local estimate at its
+    ``grid`` points, and of its cold edges at their pcurves' points (the gap the sew would have to close)."""
     nodes = cls.nodes_of(Role.FACE, face.index)
     target = cls.foot[nodes] + field.displacements[nodes]
-    return cls.uv[nodes], face_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
+    at_nodes = face_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
+    off = face_distances(morph.surface, grid.expected, grid.uv, face.uv_box)
+    uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
+    for use in face.uses:
+        if edges[use.edge].degenerate:
+            continue
+        uv.append(use.uv)
+        error.append(face_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
+                                    face.uv_box))
+    between = np.concatenate(error[1:])
+    return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
+
+
+def _largest(err: np.ndarray) -> float:
+    return float(err.max()) if len(err) else 0.0
 
 
 def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField):
@@ -272,46 +386,47 @@ def _spans(breaks: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
 
 
-def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Where an edge is refined: the midpoints of the knot spans holding a bad node whose halves each keep
-    at least ``degree + 1`` nodes, and whether it is raised to ``REFINED_DEGREE`` (its bad spans hold
-    that many nodes).  A span with fewer nodes than that is not determined by its nodes (its artificial
-    nodes would decide it, :func:`hot2cold.pipeline.edge_fit.morph_edge`), so it is not made any finer."""
-    degree = max(curve.degree, REFINED_DEGREE)
-    need = degree + 1
+def _polyline_length(points: np.ndarray) -> float:
+    """Length (mm) of the polyline through ``points (m, 3)``."""
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
+def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, spacing: float) -> tuple[np.ndarray, bool]:
+    """Where an edge is refined: the midpoints of the knot spans holding a bad node whose halves stay at least
+    ``MIN_SPAN_SPACINGS * spacing`` (mm) long, and whether it is raised to ``REFINED_DEGREE`` (it has a bad
+    node and a lower degree)."""
     breaks = knot_breaks(curve.knots, curve.degree)
-    spans = _spans(breaks, t)
-    mids, up = [], curve.degree < REFINED_DEGREE
-    for r in np.unique(spans[bad]):
-        here = t[spans == r]
-        mid = 0.5 * (breaks[r] + breaks[r + 1])
-        up &= len(here) >= need
-        if np.sum(here < mid) >= need and np.sum(here >= mid) >= need:
+    mids = []
+    for r in np.unique(_spans(breaks, t[bad])):
+        lo, hi = breaks[r], breaks[r + 1]
+        mid = 0.5 * (lo + hi)
+        if _polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= MIN_SPAN_SPACINGS * spacing:
             mids.append(mid)
-    return np.array(mids), bool(up)
+    return np.array(mids), bool(bad.any() and curve.degree < REFINED_DEGREE)
 
 
-def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, spacing: float
+                ) -> list[tuple[np.ndarray, bool]]:
     """Where a face is refined, per direction (u, v): the midpoints of the knot spans of the patches holding
-    a bad node, where both halves of the patch keep at least ``(p + 1)(q + 1)`` nodes (degrees after any
-    elevation), and whether the direction is raised to ``REFINED_DEGREE`` (its bad patches hold that many
-    nodes).  Patches with fewer nodes are decided by artificial nodes (:mod:`hot2cold.pipeline.face_fit`), not by the
-    FE nodes the tolerance is about, so they are not made any finer."""
+    a bad point whose halves along that direction stay at least ``MIN_SPAN_SPACINGS * spacing`` (mm) long
+    (measured along the patch's middle iso-curve), and whether the direction is raised to ``REFINED_DEGREE``
+    (the face has a bad point and the direction a lower degree)."""
     degrees = (surface.u_degree, surface.v_degree)
-    need = int(np.prod([max(d, REFINED_DEGREE) + 1 for d in degrees]))
     breaks = [knot_breaks(surface.u_knots, degrees[0]), knot_breaks(surface.v_knots, degrees[1])]
-    spans = np.column_stack([_spans(breaks[0], uv[:, 0]), _spans(breaks[1], uv[:, 1])])
+    patches = {tuple(x) for x in np.column_stack([_spans(breaks[0], uv[bad, 0]), _spans(breaks[1], uv[bad, 1])])}
     out = []
     for axis in (0, 1):
-        mids, up = set(), degrees[axis] < REFINED_DEGREE
-        for r, s in {tuple(x) for x in spans[bad]}:
-            here = uv[(spans[:, 0] == r) & (spans[:, 1] == s), axis]
-            lo, hi = breaks[axis][(r, s)[axis]], breaks[axis][(r, s)[axis] + 1]
+        mids = set()
+        for patch in patches:
+            lo, hi = breaks[axis][patch[axis]], breaks[axis][patch[axis] + 1]
+            other = breaks[1 - axis][patch[1 - axis]:patch[1 - axis] + 2].mean()
             mid = 0.5 * (lo + hi)
-            up &= len(here) >= need
-            if np.sum(here < mid) >= need and np.sum(here >= mid) >= need:
+            along = np.linspace(lo, mid, 9)
+            across = np.full(9, other)
+            half = evaluate_surface(surface, *((along, across) if axis == 0 else (across, along)))
+            if _polyline_length(half) >= MIN_SPAN_SPACINGS * spacing:
                 mids.add(mid)
-        out.append((np.array(sorted(mids)), bool(up)))
+        out.append((np.array(sorted(mids)), bool(bad.any() and degrees[axis] < REFINED_DEGREE)))
     return out
 
 
@@ -344,9 +459,9 @@ FitEdges = Callable[[Part, list[EdgeMorph], set[int]], list[EdgeMorph]]
 
 
 def refine(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
-           edge_morphs: list[EdgeMorph], tolerance: float, max_rounds: int, fit_face: FitFace,
+           edge_morphs: list[EdgeMorph], targets: Targets, max_rounds: int, fit_face: FitFace,
            fit_edges: FitEdges) -> RefineResult:
-    """Refine faces and edges until every error is within ``tolerance`` mm or ``max_rounds`` are done.
+    """Refine faces and edges until every error is within ``targets.limit`` mm or ``max_rounds`` are done.
 
     ``fit_face(part, face, edge_morphs) -> FaceMorph`` fits a face of a (refined) part against the given edge
     morphs;
@@ -355,6 +470,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     object changes counts as changed).  Returns the refined part
     (hot geometry, same shape), the final morphs and one record per face and edge that was refined or missed.
     """
+    limit = targets.limit
     face_morphs, edge_morphs = list(face_morphs), list(edge_morphs)
     hot_faces, hot_edges = list(part.faces), list(part.edges)
     face_added = np.zeros((len(part.faces), 2), int)
@@ -363,7 +479,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     edge_rounds = np.zeros(len(part.edges), int)
 
     def errors():
-        fe = [_face_errors(f, m, cls, field) for f, m in zip(part.faces, face_morphs)]
+        fe = [_face_errors(f, m, cls, field, g, edge_morphs, part.edges)
+              for f, m, g in zip(part.faces, face_morphs, targets.grids)]
         ee = [_edge_errors(e, m, cls, field) for e, m in zip(part.edges, edge_morphs)]
         return fe, ee
 
@@ -371,14 +488,14 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         return float(err.max()) if len(err) else 0.0
 
     face_err, edge_err = errors()
-    face_before = [worst(e) for _, e in face_err]
+    face_before = [(e.nodes, e.between) for e in face_err]
     edge_before = [worst(e) for _, e in edge_err]
     stuck_faces: set[int] = set()                # faces and edges that miss where no span may be halved
     stuck_edges: set[int] = set()
     rounds = 0
     while rounds < max_rounds:
-        bad_faces = [k for k, (_, e) in enumerate(face_err) if worst(e) > tolerance]
-        bad_edges = [k for k, (_, e) in enumerate(edge_err) if worst(e) > tolerance]
+        bad_faces = [k for k, e in enumerate(face_err) if worst(e.error) > limit]
+        bad_edges = [k for k, (_, e) in enumerate(edge_err) if worst(e) > limit]
         if not bad_faces and not bad_edges:
             stuck_faces, stuck_edges = set(), set()
             break
@@ -387,8 +504,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         elevate: set = set()                      # class roots to raise to REFINED_DEGREE
         unplaced_faces, unplaced_edges = set(), set()
         for k in bad_faces:
-            uv, err = face_err[k]
-            wanted = _face_marks(part.faces[k].surface, uv, err > tolerance)
+            err = face_err[k]
+            wanted = _face_marks(part.faces[k].surface, err.uv, err.error > limit, targets.face_spacing[k])
             if not any(len(m) or up for m, up in wanted):
                 unplaced_faces.add(k)
             for axis, (mids, up) in enumerate(wanted):
@@ -400,7 +517,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                     elevate.add(root)
         for e in bad_edges:
             t, err = edge_err[e]
-            mids, up = _edge_marks(part.edges[e].curve, t, err > tolerance)
+            mids, up = _edge_marks(part.edges[e].curve, t, err > limit, targets.edge_spacing[e])
             if not len(mids) and not up:
                 unplaced_edges.add(e)
             member = Member.edge(e)
@@ -452,27 +569,28 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         face_err, edge_err = errors()
         log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", rounds,
                  len(changed_faces), len(changed_edges),
-                 max([worst(e) for _, e in face_err] + [worst(e) for _, e in edge_err] + [0.0]))
+                 max([worst(e.error) for e in face_err] + [worst(e) for _, e in edge_err] + [0.0]))
 
     face_reports = []
     for k, (face, hot) in enumerate(zip(part.faces, hot_faces)):
-        missed = face_before[k] > tolerance
+        missed = max(face_before[k]) > limit
         if not missed and not face_rounds[k]:
             continue
         s0, s1 = hot.surface, face.surface
         face_reports.append(Refinement(
-            k, missed, not (k in stuck_faces and worst(face_err[k][1]) > tolerance),
+            k, missed, not (k in stuck_faces and worst(face_err[k].error) > limit),
             int(face_added[k, 0]), int(face_added[k, 1]),
             f"{s0.u_degree}x{s0.v_degree}", f"{s1.u_degree}x{s1.v_degree}",
             "x".join(map(str, s0.shape)), "x".join(map(str, s1.shape)), int(face_rounds[k]),
-            face_before[k], worst(face_err[k][1]), worst(node_residuals(face, face_morphs[k], cls, field))))
+            face_before[k][0], face_err[k].nodes, worst(node_residuals(face, face_morphs[k], cls, field)),
+            face_before[k][1], face_err[k].between))
     edge_reports = []
     for e, (edge, hot) in enumerate(zip(part.edges, hot_edges)):
-        missed = edge_before[e] > tolerance
+        missed = edge_before[e] > limit
         if edge.degenerate or (not missed and not edge_rounds[e]):
             continue
         edge_reports.append(EdgeRefinement(
-            e, missed, not (e in stuck_edges and worst(edge_err[e][1]) > tolerance),
+            e, missed, not (e in stuck_edges and worst(edge_err[e][1]) > limit),
             int(edge_added[e]), hot.curve.degree, edge.curve.degree,
             hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e], worst(edge_err[e][1])))
     return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds)

@@ -106,17 +106,21 @@ class Report:
     timings: dict[str, float] = field(default_factory=dict)
     inversion: dict | None = None
     tolerance: float | None = None
+    keep_knots: bool = False
+    scatter: float = 0.0
+    allowance: float = 0.0
     refinements: list[dict] = field(default_factory=list)
     edge_refinements: list[dict] = field(default_factory=list)
     g1: list[dict] = field(default_factory=list)
 
     @property
     def tolerance_met(self) -> bool | None:
-        """Whether every face's and edge's Δmax is within the tolerance (None when none was set)."""
+        """Whether every face's and edge's Δmax is within the tolerance plus the field's scatter allowance
+        (None when no tolerance was set)."""
         if self.tolerance is None:
             return None
         worst = [x.delta_max for x in (*self.faces, *self.edges) if not math.isnan(x.delta_max)]
-        return max(worst, default=0.0) <= self.tolerance
+        return max(worst, default=0.0) <= self.tolerance + self.allowance
 
     @property
     def nodes_used(self) -> int:
@@ -153,29 +157,31 @@ class Report:
             lines.append(f"solid {s.index}{name}: {'valid' if s.valid else 'INVALID'}, "
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
+        short = "its knot spans there are as short as the nodes' spacing allows"
         for r in self.refinements:
             change = (f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
                       if "delta_max_before" in r else f"fit residual {r['residual']:.2e} mm")
+            if r.get("between_before", 0.0) > (self.tolerance or 0.0):
+                change += f", between the nodes {r['between_before']:.2e} -> {r['between_after']:.2e} mm"
             if r["rounds"] == 0:
-                why = ("too few nodes where its error is to refine it" if not r.get("refinable", False)
-                       else "no refinement round was run")
+                why = short if not r.get("refinable", False) else "no refinement round was run"
                 lines.append(f"face {r['face']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r.get("degree_before", "") != r.get("degree_after", "") else "")
-            stop = "" if r.get("refinable", True) else "; too few nodes where it still misses to refine further"
+            stop = "" if r.get("refinable", True) else f"; where it still misses, {short}"
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
                          f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), "
                          f"{change}{stop}")
         for r in self.edge_refinements:
             change = f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
             if r["rounds"] == 0:
-                why = "too few nodes where its error is to refine it" if not r["refinable"] else "no round was run"
+                why = short if not r["refinable"] else "no round was run"
                 lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r["degree_before"] != r["degree_after"] else "")
-            stop = "" if r["refinable"] else "; too few nodes where it still misses to refine further"
+            stop = "" if r["refinable"] else f"; where it still misses, {short}"
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
                          f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
         if self.g1:
@@ -185,7 +191,11 @@ class Report:
             lines.append(f"G1: {len(self.g1)} tangent edges ({fixed} corrected), kink before {before:.3g}°, "
                          f"after {after:.3g}°")
         if self.tolerance is not None:
-            lines.append(f"tolerance {self.tolerance:.3g} mm: {'met' if self.tolerance_met else 'NOT met'}")
+            noise = (f" + {self.allowance:.3g} mm for the field's scatter ({self.scatter:.3g} mm about a smooth "
+                     f"field)" if self.allowance > 0.1 * self.tolerance else "")
+            strict = ", knots kept (--keep-knots)" if self.keep_knots else ""
+            lines.append(f"tolerance {self.tolerance:.3g} mm{noise}{strict}: "
+                         f"{'met' if self.tolerance_met else 'NOT met'}")
         if self.inversion:
             lines.append(f"field inverted (cold to hot): {self.inversion['iterations']} fixed-point iterations, "
                          f"residual {self.inversion['residual']:.2e} mm")
@@ -273,12 +283,15 @@ class Checks:
 
 
 def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
-                 timings: dict[str, float] | None = None, inversion: dict | None = None) -> Report:
+                 timings: dict[str, float] | None = None, inversion: dict | None = None, scatter: float = 0.0,
+                 allowance: float = 0.0) -> Report:
     """Assemble the :class:`Report` of a morph.
 
     ``context`` gives the (refined) part, the classification, the field and the tolerance; ``errors (N,)``
     is each node's distance (mm) to the cold part (eq. 21, :func:`node_errors`); ``inversion`` the field
-    inversion's record as a dict (None when the field was not inverted).
+    inversion's record as a dict (None when the field was not inverted); ``scatter`` the field's scatter
+    about a smooth field (mm, :func:`hot2cold.core.localfit.scatter`) and ``allowance`` what it adds to the
+    tolerance at the nodes (mm, :func:`hot2cold.pipeline.refine.noise_allowance`).
     """
     part, cls, field = context.part, context.classification, context.field
     faces = []
@@ -315,5 +328,6 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
         delta_between=max((f.delta_between for f in faces if not math.isnan(f.delta_between)), default=float("nan")),
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
         faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
-        tolerance=context.settings.tolerance, refinements=[asdict(r) for r in fits.refinements],
+        tolerance=context.settings.tolerance, keep_knots=context.settings.keep_knots, scatter=scatter,
+        allowance=allowance, refinements=[asdict(r) for r in fits.refinements],
         edge_refinements=[asdict(r) for r in fits.edge_refinements], g1=[asdict(r) for r in fits.g1])
