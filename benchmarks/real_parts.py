@@ -213,11 +213,23 @@ def make_field(name: str, lo: np.ndarray, hi: np.ndarray):
 
 def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
     """Largest distance (mm) of the exact cold positions of dense samples inside every hot face to the cold
-    face with the same index; ``(max, face, samples)``.
+    face with the same index; ``(max, face, samples)`` (the reduction of :func:`face_errors`)."""
+    worst, where, count = 0.0, -1, 0
+    for k, dist in enumerate(face_errors(hot, cold, exact_map, spacing)):
+        count += len(dist)
+        if len(dist) and dist.max() > worst:
+            worst, where = float(dist.max()), k
+    return worst, where, count
 
-    ``exact_map`` maps hot points ``(m, 3)`` to exact cold points ``(m, 3)``.  The faces are those of the
-    solids (:func:`solid_faces`); the cold part must have as many.  A sample the kernel cannot project counts
-    as ``inf``.  The kernel's foot points are polished by Newton's method on the cold face's own B-spline
+
+def face_errors(hot, cold, exact_map, spacing: float) -> list[np.ndarray]:
+    """Per hot face, the distances ``(m,)`` (mm) of the exact cold positions of its dense samples to the cold
+    face with the same index.
+
+    The samples are :func:`hot2cold.kernel.sampling.face_samples` at ``spacing`` mm inside every face of the
+    solids (:func:`solid_faces`); the cold part must have as many faces.  ``exact_map`` maps one face's hot
+    samples ``(m, 3)`` to their exact cold points ``(m, 3)``.  A sample the kernel cannot project counts as
+    ``inf``.  The kernel's foot points are polished by Newton's method on the cold face's own B-spline
     surface (:func:`hot2cold.core.footpoint.project_to_surface`, the nearer of the two kept): the kernel's
     projection stops about 2e-8 mm short on Rotor 67's degree-14 faces, above the affine target of 1e-8 mm.
     """
@@ -239,7 +251,7 @@ def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
     for f in hot_faces:
         builder.Add(compound, f)
     projector = Projector(cold_faces, [])
-    worst, where, count = 0.0, -1, 0
+    out = []
     for k, (_, points) in enumerate(face_samples(compound, spacing)):
         cold_points = exact_map(points)
         uv, dist = projector.to_face(k, cold_points)
@@ -251,10 +263,8 @@ def exact_error(hot, cold, exact_map, spacing: float) -> tuple[float, int, int]:
         if found.any() and surface is not None:
             fp = project_to_surface(surface, cold_points[found], uv[found], projector.face_box(k))
             dist[found] = np.where(fp.settled, np.minimum(dist[found], fp.distance), dist[found])
-        count += len(dist)
-        if len(dist) and dist.max() > worst:
-            worst, where = float(dist.max()), k
-    return worst, where, count
+        out.append(dist)
+    return out
 
 
 def one_line(text: str) -> str:
@@ -320,6 +330,47 @@ def load(data: dict) -> Run:
     return Run(**{k: v for k, v in data.items() if k in Run.__dataclass_fields__})
 
 
+def spawn(cmd: list[str], timeout: float, max_memory_gb: float | None, stderr_path: Path):
+    """Run ``cmd`` in a fresh process group (the repository first on its ``PYTHONPATH``, its stderr into
+    ``stderr_path``, address space capped at ``max_memory_gb``), killed after ``timeout`` seconds.
+
+    Returns ``(status, usage, seconds)``: the wait status (or ``"timeout"``), the child's
+    ``resource.struct_rusage`` and the wall time.
+    """
+    def limit():
+        os.setsid()
+        if max_memory_gb:
+            cap = int(max_memory_gb * 2 ** 30)
+            resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with open(stderr_path, "wb") as err:
+        child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, preexec_fn=limit, env=env)
+        start, status, usage = time.perf_counter(), None, None
+        while True:
+            pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() - start > timeout:
+                os.killpg(child.pid, signal.SIGKILL)
+                _, status, usage = os.wait4(child.pid, 0)
+                status = "timeout"
+                break
+            time.sleep(0.2)
+        child.returncode = 0        # reaped here; keep Popen from waiting again
+    return status, usage, time.perf_counter() - start
+
+
+def died(status, timeout: float, stderr_path: Path) -> str:
+    """What became of a child that wrote no result: ``timeout after T s``, ``child exit N: <its last line>``
+    or ``child killed by signal N: ...``; ``status`` as :func:`spawn` returns it."""
+    if status == "timeout":
+        return f"timeout after {timeout:.0f} s"
+    code = os.waitstatus_to_exitcode(status)
+    tail = one_line(stderr_path.read_text(errors="replace"))
+    return (f"child killed by signal {-code}" if code < 0 else f"child exit {code}") + (f": {tail}" if tail else "")
+
+
 def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_memory_gb: float | None,
               morph_args: tuple = ()) -> Run:
     """:func:`run_here` in a fresh process; a timeout, a crash or a memory limit is recorded, not raised."""
@@ -328,41 +379,14 @@ def run_child(path: Path, nodes_kind: str, field_name: str, timeout: float, max_
         out = tmp / "run.json"
         cmd = [sys.executable, __file__, "--one", str(path), "--nodes", nodes_kind, "--fields", field_name,
                "--workdir", str(tmp), "--json", str(out), f"--morph-args={' '.join(morph_args)}"]
-
-        def limit():
-            os.setsid()
-            if max_memory_gb:
-                cap = int(max_memory_gb * 2 ** 30)
-                resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
-
-        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-        with open(tmp / "stderr.txt", "wb") as err:
-            child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, preexec_fn=limit, env=env)
-            start, status, usage = time.perf_counter(), None, None
-            while True:
-                pid, status, usage = os.wait4(child.pid, os.WNOHANG)
-                if pid:
-                    break
-                if time.perf_counter() - start > timeout:
-                    os.killpg(child.pid, signal.SIGKILL)
-                    _, status, usage = os.wait4(child.pid, 0)
-                    status = "timeout"
-                    break
-                time.sleep(0.2)
-            child.returncode = 0        # reaped here; keep Popen from waiting again
+        status, usage, seconds = spawn(cmd, timeout, max_memory_gb, tmp / "stderr.txt")
         if out.exists():
             run = load(json.loads(out.read_text()))
         else:
             run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
-            if status == "timeout":
-                run.message = f"timeout after {timeout:.0f} s"
-            else:
-                code = os.waitstatus_to_exitcode(status)
-                tail = one_line((tmp / "stderr.txt").read_text(errors="replace"))
-                run.message = (f"child killed by signal {-code}" if code < 0 else f"child exit {code}") + \
-                    (f": {tail}" if tail else "")
+            run.message = died(status, timeout, tmp / "stderr.txt")
             run.peak_mb = usage.ru_maxrss / 1024.0
-            run.seconds = time.perf_counter() - start
+            run.seconds = seconds
         return run
 
 
