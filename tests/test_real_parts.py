@@ -116,11 +116,14 @@ def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
                      free_edges=0, faces_cold=2, exact_max=1e-12)
     smooth = bench.Run(part="a", path="a", nodes_kind="fe", field="smooth", faces=2, exit_code=0, valid=True,
                        free_edges=0, faces_cold=2, exact_max=1e-3)
+    missed = bench.Run(part="a", path="a", nodes_kind="fe", field="smooth", faces=2, exit_code=5, valid=True,
+                       free_edges=0, faces_cold=2, exact_max=2e-3)
     assert bench.load(asdict(died)) == died                         # --json, then --show
-    board = bench.scoreboard([good, smooth, died, hung])
-    assert sum(line.startswith("| ") for line in board.splitlines()) == 5       # the head and 4 rows
-    assert board.endswith("2 of 4 morph (exit 0, valid on read-back, faces kept, 0 free edges); "
-                          "affine within 1e-08 mm on 1 of 3")
+    board = bench.scoreboard([good, smooth, missed, died, hung])
+    assert sum(line.startswith("| ") for line in board.splitlines()) == 6       # the head and 5 rows
+    assert board.endswith("3 of 5 morph (a cold part written, exit 0 or 5, valid on read-back, faces kept, "
+                          "0 free edges; 2 exit 0); affine within 1e-08 mm on 1 of 3; smooth within 0.001 mm "
+                          "on 1 of 2")
 
 
 @pytest.mark.slow

@@ -52,6 +52,7 @@ def tolerance_missed(result) -> str | None:
     report = result.report
     if report.tolerance_met is not False:
         return None
-    noise = f" + {report.allowance:.3g} mm for the field's scatter" if report.allowance > 0 else ""
+    noise = (f" + {report.allowance:.3g} mm for the field's scatter" if report.allowance > 0.1 * report.tolerance
+             else "")
     return (f"tolerance {report.tolerance:g} mm{noise} not met (Δmax {report.delta_max:.3g} mm; the report "
             f"says where); the cold part is written")

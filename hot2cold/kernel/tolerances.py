@@ -23,6 +23,7 @@ import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepLib import BRepLib
+from OCP.GeomAbs import GeomAbs_BSplineCurve
 from OCP.ShapeBuild import ShapeBuild_Edge
 from OCP.ShapeFix import ShapeFix_Edge
 from OCP.TopAbs import TopAbs_EDGE
@@ -36,10 +37,19 @@ from .rebuild import ColdKernel
 log = logging.getLogger(__name__)
 
 
+#: A B-spline edge is sampled at least this many times per knot of its 3D curve.
+_PER_KNOT = 8
+
+
 def _gap(edge, face, n: int) -> float:
-    """Largest distance between the edge's 3D curve and its curve on ``face`` at ``n`` parameters."""
+    """Largest distance between the edge's 3D curve and its curve on ``face`` at ``n`` parameters, or at
+    ``_PER_KNOT`` per knot of a B-spline curve where that is more: an edge refined to a tolerance has many
+    spans, and a gap that rises and falls within a span slipped between 51 samples, to be found by BRepCheck
+    (InvalidCurveOnSurface: a sector under a field with a kink, its arcs refined to 30 poles)."""
     c3d = BRepAdaptor_Curve(edge)
     on_face = BRepAdaptor_Curve(edge, face)
+    if c3d.GetType() == GeomAbs_BSplineCurve:
+        n = max(n, _PER_KNOT * c3d.NbKnots())
     gap = 0.0
     for t in np.linspace(c3d.FirstParameter(), c3d.LastParameter(), n):
         gap = max(gap, c3d.Value(t).Distance(on_face.Value(t)))
