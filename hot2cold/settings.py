@@ -53,6 +53,13 @@ class Settings:
     keep_knots : bool
         Keep every degree and knot vector of the hot part, as the paper does (its strict same-structure
         mode): nothing is refined; the tolerance is still checked and reported.
+    smooth : bool
+        Fit the field's signal, not its noise: where the nodes scatter about a smooth field (noise, volume
+        nodes beside the surface; :func:`hot2cold.core.localfit.scatter`) by more than a hundredth of the
+        tolerance, every edge and face fit is smoothed towards the field's local estimate until it leaves
+        that scatter at the nodes (Tikhonov regularisation with its weight chosen by the discrepancy
+        principle, :func:`hot2cold.core.lstsq.solve_tsvd`).  A plain fit follows the noise, most where few
+        nodes decide a pole (a thin leading edge).
     max_refinements : int
         Rounds of refinement a face gets at the most.
     g1_angle : float or None
@@ -95,6 +102,7 @@ class Settings:
     artificial_weight: float = 0.1
     tolerance: float | None = 1e-3
     keep_knots: bool = False
+    smooth: bool = True
     max_refinements: int = 4
     g1_angle: float | None = 1.0
     blas_threads: int | None = None

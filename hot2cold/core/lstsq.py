@@ -60,6 +60,8 @@ class TsvdSolution:
         (``sigma_max / sigma_min`` is the condition number of ``A`` itself); 0.0 for an empty ``A``.
     cutoff : float, the threshold ``sigma_1 * n * epsilon``.
     singular_values : (min(s, n),) float array, all singular values of ``A`` sorted from largest to smallest.
+    smoothing : float, the Tikhonov parameter ``lambda`` the data's noise chose (0: none; inf: the prior in
+        every direction), see :func:`solve_tsvd`'s ``noise``.
     """
 
     x: np.ndarray
@@ -70,6 +72,7 @@ class TsvdSolution:
     sigma_min: float
     cutoff: float
     singular_values: np.ndarray
+    smoothing: float = 0.0
 
     @property
     def rank_deficient(self) -> bool:
@@ -187,7 +190,8 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
     return rc
 
 
-def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: int | None = None,
+def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,
+               noisy_rows: int | None = None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
 
@@ -206,6 +210,15 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
         dropped the prior changes nothing (and a callable is not called: a prior that costs a solve of its own
         is paid for only where it is used); where directions are dropped they take the prior's value instead
         of zero.  None: zero, the paper's minimum-norm solution.
+    noise : float >= 0, the standard deviation of the noise on each entry of ``B`` (rows of weight 1), e.g.
+        the scatter of an FE field about a smooth one.  With a prior, the kept directions are then smoothed
+        towards it (Tikhonov, filter factors ``sigma_i^2 / (sigma_i^2 + lambda^2)``), ``lambda`` chosen by
+        the discrepancy principle: the residual ``||A x - B||^2`` becomes ``noisy_rows * k * noise^2``, what
+        the noise alone leaves, where the plain fit's residual is below that (it fits noise); where it is
+        above (the fit misses the data by more than their noise), nothing is smoothed.  The fit then follows
+        the signal and leaves the noise, above all in directions the data barely determine (poles with few
+        nodes), where a plain fit amplifies it.  0: no smoothing.
+    noisy_rows : int or None, the rows that carry the noise (default all ``s``).
     block_rows : int > 0 or None, rows of ``A`` reduced at a time; None: ``ROWS_PER_COLUMN`` times the
         columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
         ``block_bytes``.  It changes the rounding, not the result.
@@ -276,14 +289,55 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, block_rows: in
     cutoff = float(sigma[0]) * n * float(epsilon)
     keep = sigma > cutoff
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
-    x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
-    if prior is not None and rank < n:
-        x0 = _checked_prior(prior, A.shape, b.shape).reshape(n, k)
-        x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
+    lam = 0.0
+    if noise > 0 and prior is not None and rank:
+        target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2
+        lam, x = _smoothed(sigma, rank, vt, utb, b2, target, lambda: _checked_prior(prior, A.shape, b.shape))
+    else:
+        x = None
+    if x is None:
+        x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
+        if prior is not None and rank < n:
+            x0 = _checked_prior(prior, A.shape, b.shape).reshape(n, k)
+            x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
     condition = float(sigma[0] / sigma[rank - 1]) if rank else float("nan")
     return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
                         sigma_max=float(sigma[0]), sigma_min=float(sigma[-1]), cutoff=cutoff,
-                        singular_values=sigma)
+                        singular_values=sigma, smoothing=lam)
+
+
+def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, b: np.ndarray, target: float,
+              prior) -> tuple[float, np.ndarray | None]:
+    """The Tikhonov solution towards ``prior() (n, k)`` whose residual is ``target``, and its ``lambda``:
+    ``(0, None)`` where the plain truncated fit leaves ``target`` or more already.
+
+    ``sigma (m,)`` are the singular values (the first ``rank`` kept), ``vt (m, n)`` and ``utb (m, k)`` the
+    SVD's right vectors and ``U^T B``, ``b (s, k)`` the right-hand side.  With ``c = U^T (B - A x0)``
+    (``c_i = (U^T B)_i - sigma_i (V^T x0)_i``), ``x = x0 + sum_i f_i c_i / sigma_i v_i`` over the kept
+    directions (the prior in the dropped ones) leaves ``||B||^2 - ||U^T B||^2`` (outside the range of ``A``),
+    the dropped ``c_i``, and ``(1 - f_i)^2 c_i^2`` with ``1 - f_i = lambda^2 / (sigma_i^2 + lambda^2)``:
+    increasing in ``lambda``, solved for by bisection on its logarithm."""
+    outside = max(float(np.sum(b * b) - np.sum(utb * utb)), 0.0)
+    if outside + float(np.sum(utb[rank:] ** 2)) >= target:
+        return 0.0, None
+    x0 = prior().reshape(vt.shape[1], -1)
+    c = utb - sigma[:, None] * (vt @ x0)                                        # (m, k)
+    fixed = outside + float(np.sum(c[rank:] ** 2))
+    power = np.sum(c[:rank] ** 2, axis=1)                                       # (rank,)
+    kept = sigma[:rank]
+
+    def residual(lam: float) -> float:
+        return fixed + float(np.sum((lam ** 2 / (kept ** 2 + lam ** 2)) ** 2 * power))
+
+    if fixed + float(power.sum()) <= target:                                    # lambda -> inf: all prior
+        return float("inf"), x0.copy()
+    lo, hi = np.log(kept[-1]) - 30.0, np.log(kept[0]) + 30.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if residual(np.exp(mid)) < target else (lo, mid)
+    lam = float(np.exp(0.5 * (lo + hi)))
+    f = kept ** 2 / (kept ** 2 + lam ** 2)
+    return lam, x0 + vt[:rank].T @ ((f / kept)[:, None] * c[:rank])
 
 
 def _checked_prior(prior, a_shape: tuple[int, int], b_shape: tuple[int, ...]) -> np.ndarray:

@@ -378,8 +378,10 @@ class FaceGrid:
     hot : (m, 3) float array, the hot surface there (mm).
     expected : (m, 3) float array, ``hot`` moved by the field's local estimate: where the cold face should
         pass, as far as the nodes tell.
+    near : (m,) bool array, the points near the face's own nodes (:func:`face_grids`), where the nodes tell
+        the field on the face.
     slack : (m,) float array, how far (mm) the estimate misses the displacements of the nearest
-        ``_SLACK_NODES`` nodes at the most: where
+        ``_SLACK_NODES`` nodes at the most (0 where not ``near``): where
         the field has a kink the local fits cannot follow (next to a clamped face) or scatters, the estimate
         between the nodes is no better than that.
     """
@@ -388,12 +390,15 @@ class FaceGrid:
     hot: np.ndarray
     expected: np.ndarray
     slack: np.ndarray
+    near: np.ndarray
 
     def take(self, keep: np.ndarray) -> FaceGrid:
         """The grid points ``keep`` (a mask or indices) only."""
-        return FaceGrid(self.uv[keep], self.hot[keep], self.expected[keep], self.slack[keep])
+        return FaceGrid(self.uv[keep], self.hot[keep], self.expected[keep], self.slack[keep], self.near[keep])
 
 
+#: A point of a face's grid is near the face's nodes within this many of their median spacings.
+GRID_REACH = 2.0
 #: The slack of a grid point is the estimate's largest miss at this many nearest nodes.
 _SLACK_NODES = 8
 #: A face whose own nodes (with its edges' and vertices') are fewer than this is estimated from every node.
@@ -404,38 +409,42 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                estimator: Callable[[np.ndarray], np.ndarray], neighbours: int) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part``, ``CHECK_SPACING`` x the part's diagonal apart.
 
-    The points are moved by a :class:`~hot2cold.pipeline.artificial.FieldEstimator` over the face's own
-    nodes, those of its edges and those of its vertices (``neighbours`` nearest), or by ``estimator`` (over
-    every node) where those are fewer than ``_FACE_ESTIMATE_MIN``.  A thin wall's two sides are nearer each
-    other than the nodes' spacing, and an estimate over every node mixed the field of the far side in: on
-    the bundled mixer segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.
-    The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
-    elevation keep the surface), so one set of grids serves it and the checks of the cold part."""
+    Near the face's own nodes (those of the face, its edges and its vertices; within ``GRID_REACH`` times
+    their median spacing) the points are moved by a :class:`~hot2cold.pipeline.artificial.FieldEstimator`
+    over those nodes (``neighbours`` nearest), elsewhere by ``estimator`` (over every node).  A thin wall's two
+    sides are nearer each other than the nodes' spacing, and an estimate over every node mixed the field of
+    the far side in: on the bundled mixer segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own
+    nodes.  Away from its own nodes a face's estimate extrapolates (1 mm off on faces of an ANSYS air
+    volume with a few nodes each), and the estimate over every node, which has nodes all around, is the
+    better one.  The hot surfaces' parameters stay valid through the refinement to a tolerance (knot
+    insertion and degree elevation keep the surface), so one set of grids serves it and the checks of the
+    cold part."""
     from .artificial import FieldEstimator
 
     spacing = CHECK_SPACING * part.diagonal
     grids = []
     for face in part.faces:
         uv = face_grid(face, spacing, projector)
-        if not len(uv):
-            grids.append(FaceGrid(uv, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))
-            continue
-        hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1])
+        hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
+        expected, slack, near = hot + estimator(hot), np.zeros(len(uv)), np.zeros(len(uv), bool)
         edges = {use.edge for use in face.uses}
         vertices = {v for e in edges for v in part.edges[e].vertices}
         nodes = np.concatenate([classification.nodes_of(Role.FACE, face.index)]
                                + [classification.nodes_of(Role.EDGE, e) for e in sorted(edges)]
                                + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
-        own = len(nodes) >= _FACE_ESTIMATE_MIN
-        local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours) if own \
-            else estimator
-        slack = np.zeros(len(uv))
-        if len(nodes):
-            feet = classification.foot[nodes]
-            misses = np.linalg.norm(local(feet) - field.displacements[nodes], axis=1)
-            near = cKDTree(feet).query(hot, k=min(_SLACK_NODES, len(feet)))[1].reshape(len(hot), -1)
-            slack = misses[near].max(axis=1)
-        grids.append(FaceGrid(uv, hot, hot + local(hot), slack))
+        feet = np.unique(classification.foot[nodes], axis=0)
+        if len(uv) and len(feet) >= _FACE_ESTIMATE_MIN:
+            tree = cKDTree(feet)
+            reach = GRID_REACH * float(np.median(tree.query(feet, k=2)[0][:, 1]))
+            near = tree.query(hot, distance_upper_bound=reach)[0] < np.inf
+            if near.any():
+                local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
+                expected[near] = hot[near] + local(hot[near])
+                misses = np.linalg.norm(local(classification.foot[nodes]) - field.displacements[nodes], axis=1)
+                closest = cKDTree(classification.foot[nodes]).query(
+                    hot[near], k=min(_SLACK_NODES, len(nodes)))[1].reshape(int(near.sum()), -1)
+                slack[near] = misses[closest].max(axis=1)
+        grids.append(FaceGrid(uv, hot, expected, slack, near))
     return grids
 
 

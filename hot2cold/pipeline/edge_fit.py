@@ -106,7 +106,7 @@ def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEsti
 
 def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
                estimator: FieldEstimator | None, epsilon: float, index: int = -1,
-               artificial_weight: float = 1.0) -> EdgeMorph:
+               artificial_weight: float = 1.0, noise: float = 0.0) -> EdgeMorph:
     """Morph one clamped curve.
 
     Parameters
@@ -117,6 +117,8 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
     estimator : gives artificial nodes in knot spans with too few nodes (None: none are added).
     epsilon : machine-precision factor of the SVD cut-off (eq. 20).
     artificial_weight : weight of the artificial nodes' rows against the FE nodes' (1).
+    noise : the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit is smoothed
+        towards the field's estimate until it leaves that much at the nodes (:func:`~hot2cold.core.lstsq.solve_tsvd`).
     """
     n = curve.n_poles
     delta = np.zeros((n, 3))
@@ -135,7 +137,8 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
         basis = weight[:, None] * curve_basis(curve, t).toarray()
         rhs = weight[:, None] * disp - basis[:, [0, -1]] @ delta[[0, -1]]        # eq. (11)-(12)
         prior = None if estimator is None else (lambda: _field_prior(curve, end_disp, estimator))
-        sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon, prior=prior)         # eq. (13)-(20)
+        sol = solve_tsvd(basis[:, 1:-1], rhs, epsilon, prior=prior,         # eq. (13)-(20)
+                         noise=noise if prior is not None else 0.0, noisy_rows=len(t) - artificial)
         delta[1:-1] = sol.x
         rank, condition = sol.rank, sol.condition
     elif n > 2:
@@ -147,8 +150,9 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
 
 
 def morph_edges(part: Part, cls: Classification, field: DisplacementField, vertex_disp: np.ndarray,
-                estimator: FieldEstimator, settings: Settings) -> list[EdgeMorph]:
-    """Morph every edge of ``part`` once (degenerate edges are carried as None curves)."""
+                estimator: FieldEstimator, settings: Settings, noise: float = 0.0) -> list[EdgeMorph]:
+    """Morph every edge of ``part`` once (degenerate edges are carried as None curves); ``noise`` as in
+    :func:`morph_edge`."""
     out = []
     for edge in part.edges:
         if edge.degenerate:
@@ -157,6 +161,6 @@ def morph_edges(part: Part, cls: Classification, field: DisplacementField, verte
         nodes = cls.nodes_of(Role.EDGE, edge.index)
         out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
                               end_displacements(part, edge, vertex_disp, estimator), estimator, settings.svd_epsilon,
-                              edge.index, settings.artificial_weight))
+                              edge.index, settings.artificial_weight, noise))
     log.info("morphed %d edges", len(out))
     return out

@@ -188,11 +188,14 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
 
 def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
                edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None) -> FaceMorph:
+               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
+               noise: float = 0.0) -> FaceMorph:
     """Morph one face with its boundary taken from the morphed edges.
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
-    domain.
+    domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
+    is smoothed towards the field's estimate until it leaves that much at the face's nodes
+    (:func:`~hot2cold.core.lstsq.solve_tsvd`).
     """
     surface = face.surface
     nu, nv = surface.shape
@@ -249,7 +252,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         flat = delta.reshape(-1, 3)
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
         sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon,                   # eq. (19)-(20)
-                         prior=lambda: _field_prior(surface, free, delta, estimator))
+                         prior=lambda: _field_prior(surface, free, delta, estimator), noise=noise,
+                         noisy_rows=len(nodes))
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
     return FaceMorph(face.index, surface.with_poles(surface.poles + delta), len(nodes), edge_rows,
@@ -259,7 +263,7 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
 def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_morphs: list[EdgeMorph],
                 vertex_disp: np.ndarray, estimator: FieldEstimator, settings: Settings,
                 trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-                progress=None) -> list[FaceMorph]:
+                progress=None, noise: float = 0.0) -> list[FaceMorph]:
     """Morph every face of ``part``.
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
@@ -268,7 +272,7 @@ def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_
     out = []
     for face in part.faces:
         out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                              trimmed_away))
+                              trimmed_away, noise))
         if progress is not None:
             progress(len(out), len(part.faces))
     log.info("morphed %d faces", len(out))

@@ -152,6 +152,7 @@ class MorphContext:
     strain : float, the field's largest strain (:class:`~hot2cold.pipeline.checks.FieldScale`): a kink the
         morph adds counts beyond ``_KINK_NOISE_DEG`` plus twice this times the hot angle (what the field itself
         does to an angle that is not quite zero when hot).
+    noise : float, the scatter (mm per component) the fits smooth away (:func:`smoothing_noise`).
     """
 
     part: Part
@@ -163,10 +164,11 @@ class MorphContext:
     projector: Projector
     tangent: list[TangentEdge]
     strain: float = 0.0
+    noise: float = 0.0
 
     @classmethod
     def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
-           projector: Projector, strain: float = 0.0) -> MorphContext:
+           projector: Projector, strain: float = 0.0, noise: float = 0.0) -> MorphContext:
         """The context of a classified field: the vertex displacements (eq. 10) from the nodes on or near
         the vertices, an estimator over the used nodes' foot points, the tangent edges."""
         used = classification.used
@@ -174,7 +176,8 @@ class MorphContext:
                                    settings.vertex_neighbours)
         vertex_disp = vertex_displacements(part, classification, field, estimator)
         tangent = [] if settings.g1_angle is None else tangent_edges(part, settings.g1_angle)
-        return cls(part, classification, field, vertex_disp, estimator, settings, projector, tangent, strain)
+        return cls(part, classification, field, vertex_disp, estimator, settings, projector, tangent, strain,
+                   noise)
 
     def trimmed_away(self, k: int, uv: np.ndarray) -> np.ndarray:
         """``(m,)`` bool: which of the parameters ``uv (m, 2)`` lie outside face ``k``'s trimmed domain."""
@@ -184,7 +187,7 @@ class MorphContext:
         """Every edge morphed (eq. 10-20), and at the ends of tangent edges given one tangent plane per corner
         (paper section 5); returns the edge morphs and the corner reports."""
         edge_morphs = morph_edges(self.part, self.classification, self.field, self.vertex_displacements,
-                                  self.estimator, self.settings)
+                                  self.estimator, self.settings, self.noise)
         if not self.tangent:
             return edge_morphs, []
         curves, corners = correct_corners(self.part, [e.curve for e in edge_morphs], self.tangent,
@@ -195,13 +198,14 @@ class MorphContext:
                   ) -> list[FaceMorph]:
         """Every face morphed against the morphed edges (eq. 23-38, artificial nodes eq. 39)."""
         return morph_faces(self.part, self.classification, self.field, edge_morphs, self.vertex_displacements,
-                           self.estimator, self.settings, trimmed_away=self.trimmed_away, progress=progress)
+                           self.estimator, self.settings, trimmed_away=self.trimmed_away, progress=progress,
+                           noise=self.noise)
 
     def fit_face(self, part: Part, face: Face, edge_morphs: list[EdgeMorph]) -> FaceMorph:
         """One face of ``part`` (this context's part, or a refined one) morphed against ``edge_morphs``
         (eq. 23-38); :func:`~hot2cold.pipeline.refine.refine`'s ``fit_face``."""
         return morph_face(face, part, self.classification, self.field, edge_morphs, self.vertex_displacements,
-                          self.estimator, self.settings, self.trimmed_away)
+                          self.estimator, self.settings, self.trimmed_away, self.noise)
 
     def refit_edges(self, part: Part, edge_morphs: list[EdgeMorph], refined: set[int]) -> list[EdgeMorph]:
         """The edges in ``refined`` of the refined ``part`` morphed again (eq. 10-20) and the corners of
@@ -213,7 +217,8 @@ class MorphContext:
             edge, nodes = part.edges[e], cls.nodes_of(Role.EDGE, e)
             edge_morphs[e] = morph_edge(edge.curve, cls.t[nodes], self.field.displacements[nodes],
                                         end_displacements(part, edge, self.vertex_displacements, self.estimator),
-                                        self.estimator, settings.svd_epsilon, e, settings.artificial_weight)
+                                        self.estimator, settings.svd_epsilon, e, settings.artificial_weight,
+                                        self.noise)
         if self.tangent:
             curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent, _KINK_NOISE_DEG,
                                         decided=edge_decided(part), strain=self.strain)
@@ -310,6 +315,19 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     return result
 
 
+#: Scatter below this share of the tolerance is not smoothed: it cannot carry a fit out of the tolerance, and
+#: smoothing towards the field's estimate is not free (a second fit per face).
+_SMOOTH_SHARE = 0.01
+
+
+def smoothing_noise(scatter: float, settings: Settings) -> float:
+    """The scatter (mm) the fits smooth away (:func:`~hot2cold.core.lstsq.solve_tsvd`'s ``noise``): the
+    field's own, where it is above ``_SMOOTH_SHARE`` of the tolerance and ``settings.smooth`` is set, else 0."""
+    if not settings.smooth or settings.tolerance is None or scatter <= _SMOOTH_SHARE * settings.tolerance:
+        return 0.0
+    return scatter
+
+
 def _morph(hot, field, settings: Settings, units: str, field_name: str | None, invert: bool,
            progress: Progress | None) -> MorphResult:
     """:func:`morph` within its BLAS thread limit, unchecked."""
@@ -337,11 +355,17 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
                                                           settings.vertex_neighbours, GAP_SHARE * part.diagonal),
                               field.node_ids, field.source)
     scale = FieldScale.of(cls, field)
+    noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
+    allowance = noise_allowance(noise, int(cls.used.sum()))
+    if noise > 0.1 * (settings.tolerance or np.inf):
+        log.info("the field scatters by %.3g mm about a smooth field (per component): the fits are smoothed "
+                 "and the tolerance at the nodes is widened by %.3g mm", noise, allowance)
     stages.lap("classify")
     stages.progress("classify")
 
     # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
-    context = MorphContext.of(part, cls, field, settings, projector, scale.strain)
+    context = MorphContext.of(part, cls, field, settings, projector, scale.strain,
+                              smoothing_noise(noise, settings))
     edge_morphs, corners = context.fit_edges()
     stages.lap("edges")
     stages.progress("edges")
@@ -354,11 +378,6 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     # error at the nodes or between them misses it; from here on the context's part is the refined hot part
     # (same shape, same parameters: the grids over the faces stay valid)
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours)
-    noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
-    allowance = noise_allowance(noise, int(cls.used.sum()))
-    if noise > 0.1 * (settings.tolerance or np.inf):
-        log.info("the field scatters by %.3g mm about a smooth field (per component): the tolerance at the "
-                 "nodes is widened by %.3g mm", noise, allowance)
     refinements, edge_refinements = (), ()
     if settings.tolerance is not None and not settings.keep_knots:
         targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids)

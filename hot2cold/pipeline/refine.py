@@ -66,10 +66,6 @@ _NEWTON_STEPS = 8
 #: spans would be decided by the artificial nodes (the field's local estimate) rather than by the nodes.
 MIN_SPAN_SPACINGS = 1.0
 
-#: A point of a face's grid counts where the nodes tell the field (:class:`Targets`) when a node's foot point
-#: lies within this many node spacings of it.
-GRID_REACH = 2.0
-
 
 @dataclass(frozen=True)
 class Refinement:
@@ -175,7 +171,7 @@ class Targets:
     edge_spacing : (n_edges,) float array, the same for each edge.
     grids : list of :class:`~hot2cold.pipeline.checks.FaceGrid`, per face whose own nodes are fewer than
         its poles (they do not determine it; a face with nodes only on its edges has none) the grid points
-        within :data:`GRID_REACH` node spacings of a node, with the field's local estimate there, less the
+        near its nodes (``FaceGrid.near``), with the field's local estimate there, less the
         estimate's own miss at the nearest nodes (its ``slack``): the error between the nodes as far as the
         nodes tell.  Other faces are measured at their nodes: the estimate, a local quadratic, is no better
         than the fit where the nodes determine the face, and worse where it reaches past the nodes (on the
@@ -192,13 +188,13 @@ class Targets:
     def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid]) -> Targets:
         """The targets of a classified field: node spacings (median distance from each used node's foot point
         to the nearest other one, over the nodes of a face and its edges, or of an edge; the median over all
-        where there are none) and the grid points of ``grids`` near a node."""
+        where there are none) and the grid points of ``grids`` near the nodes of faces their own nodes do
+        not determine."""
         used = np.flatnonzero(classification.used)
         feet = np.unique(classification.foot[used], axis=0)
         nearest = np.full(len(classification.used), np.nan)
         if len(feet) > 1:
-            tree = cKDTree(feet)
-            nearest[used] = tree.query(classification.foot[used], k=2)[0][:, 1]
+            nearest[used] = cKDTree(feet).query(classification.foot[used], k=2)[0][:, 1]
         overall = float(np.nanmedian(nearest)) if np.isfinite(nearest).any() else np.inf
 
         def median(nodes: np.ndarray) -> float:
@@ -210,14 +206,9 @@ class Targets:
         face_spacing = np.array([median(np.concatenate(
             [classification.nodes_of(Role.FACE, f.index)]
             + [classification.nodes_of(Role.EDGE, use.edge) for use in f.uses])) for f in part.faces])
-        near = []
-        for face, grid in zip(part.faces, grids):
-            own = len(classification.nodes_of(Role.FACE, face.index))
-            if len(grid.uv) and len(feet) > 1 and own < np.prod(face.surface.shape):
-                keep = tree.query(grid.hot, distance_upper_bound=GRID_REACH * face_spacing[face.index])[0] < np.inf
-            else:
-                keep = np.zeros(len(grid.uv), bool)
-            near.append(grid.take(keep))
+        near = [grid.take(grid.near if len(classification.nodes_of(Role.FACE, face.index))
+                          < np.prod(face.surface.shape) else np.zeros(len(grid.uv), bool))
+                for face, grid in zip(part.faces, grids)]
         return cls(limit, face_spacing, edge_spacing, near)
 
 
