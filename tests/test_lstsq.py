@@ -347,3 +347,48 @@ def test_repeated_and_unsorted_sparse_entries_are_summed():
 def test_block_rows_must_be_positive(block_rows):
     with pytest.raises(ValueError, match="block_rows"):
         solve_tsvd(np.eye(4, 2), np.ones(4), block_rows=block_rows)
+
+
+def _weak_problem(seed: int = 0):
+    """2000 rows, 40 unknowns, the last 5 columns a thousand times weaker (poles few nodes decide)."""
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(2000, 40))
+    a[:, -5:] *= 1e-3
+    return rng, a, rng.normal(size=(40, 3))
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_noise_is_smoothed_towards_the_prior_by_the_discrepancy_principle(sparse):
+    """Noise of 0.05 on every entry: the plain fit throws the weak directions 2.6 off; smoothed towards a prior
+    0.01 off, they stay within 0.02, and the residual is what the noise alone leaves (2000 x 3 x 0.05^2)."""
+    rng, a, x_true = _weak_problem()
+    b = a @ x_true + rng.normal(0.0, 0.05, (2000, 3))
+    prior = x_true + rng.normal(0.0, 0.01, x_true.shape)
+    matrix = scipy.sparse.csr_array(a) if sparse else a
+    plain = solve_tsvd(matrix, b)
+    smooth = solve_tsvd(matrix, b, prior=prior, noise=0.05)
+    assert np.abs(plain.x - x_true).max() > 1.0
+    assert np.abs(smooth.x - x_true).max() < 0.02
+    assert 0 < smooth.smoothing < np.inf and plain.smoothing == 0.0
+    assert np.sum((a @ smooth.x - b) ** 2) == pytest.approx(2000 * 3 * 0.05 ** 2, rel=1e-6)
+
+
+def test_no_smoothing_where_the_fit_misses_by_more_than_the_noise():
+    """A model error far above the stated noise: the plain fit is kept as it is, and the prior not asked for."""
+    rng, a, x_true = _weak_problem(1)
+    b = a @ x_true + rng.normal(0.0, 0.05, (2000, 3))
+
+    def prior():
+        raise AssertionError("the prior is not needed")
+
+    plain = solve_tsvd(a, b)
+    same = solve_tsvd(a, b, prior=prior, noise=0.001)
+    assert same.smoothing == 0.0 and np.array_equal(same.x, plain.x)
+
+
+def test_noise_beyond_everything_the_data_say_gives_the_prior():
+    rng, a, x_true = _weak_problem(2)
+    b = a @ x_true
+    prior = np.zeros_like(x_true)
+    sol = solve_tsvd(a, b, prior=prior, noise=1e6, noisy_rows=100)
+    assert sol.smoothing == np.inf and np.array_equal(sol.x, prior)
