@@ -276,7 +276,8 @@ class _Task:
 
 def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
                edges: list[TangentEdge] | None = None,
-               n_points_factor: int = 2) -> tuple[list[BSplineSurface], list[G1Report]]:
+               n_points_factor: int = 2, frozen: dict[int, str] | None = None
+               ) -> tuple[list[BSplineSurface], list[G1Report]]:
     """Remove the kinks the morph left along the hot part's tangent edges.
 
     Parameters
@@ -287,6 +288,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         :class:`~hot2cold.core.model.Side` or its value, "u0" ...).
     edges : the tangent edges to treat; default :func:`tangent_edges` of ``part``.
     n_points_factor : equidistant edge points per pole of a second row (the paper takes about two).
+    frozen : faces that must not turn (face index -> why), e.g. because turning would take them off their
+        nodes by more than the tolerance; the other face of such an edge turns into their tangent plane.
 
     Returns
     -------
@@ -316,7 +319,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
         # the side row and the second row only, whatever part of the side the edge covers.
         sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
-        why = [_fixed_reason(face, found, tied_sides[face.index]) for face, found in zip((fa, fb), sides)]
+        why = [(frozen or {}).get(face.index) or _fixed_reason(face, found, tied_sides[face.index])
+               for face, found in zip((fa, fb), sides)]
         if all(why):
             reason = why[0] if why[0] == why[1] else "; ".join(why)
             log.info("G1: edge %d (faces %d, %d) not corrected: %s", te.edge, *te.faces, reason)
