@@ -359,3 +359,35 @@ def test_refined_trimmed_band_face_stays_on_its_edges_and_keeps_thevolume():
     # the volume of a divergence-free bend: 0.087 mm^3 off plain, 1e-5 refined (0.013 with the linear
     # field estimator of the artificial nodes)
     assert abs(volume(refined.cold.wrapped) - hot) <= abs(volume(plain.cold.wrapped) - hot) / 5
+
+
+def test_a_face_with_nodes_only_on_its_edges_is_refined_from_them():
+    """The wave band's planar top and bottom from a triangulation's vertices, as an STL or CFD surface mesh
+    gives them: a plane's triangulation has vertices only on its boundary, so the band faces get no node of
+    their own.  With their knots kept they stay flat between their bent edges (0.17 mm off the exact cold
+    geometry); by default they are refined from what their edges and the field's estimate near the edge
+    nodes say, and follow the field."""
+    from hot2cold.core.model import Role
+    from hot2cold.kernel.tessellate import tessellate
+
+    from conftest import face_deviation
+
+    shape = _wave_band()
+    nodes = np.unique(np.round(tessellate(shape, 0.05).vertices, 9), axis=0)
+    bend = _bend(1e-4)
+    field = (nodes, bend(nodes - [50.0, 0.0, 0.0]))
+
+    def exact(points):
+        return points + bend(points - [50.0, 0.0, 0.0])
+
+    plain = morph(shape, field, Settings(keep_knots=True))
+    result = morph(shape, field)
+    before = face_deviation(plain, exact, 0.5)
+    after = face_deviation(result, exact, 0.5)
+    bands = [f.index for f in plain.report.faces if f.control_points == "2x2" and before[f.index].max() > 0.1]
+    assert len(bands) == 2                                             # flat between bent edges
+    assert all(not len(result.classification.nodes_of(Role.FACE, k)) for k in bands)     # no node of their own
+    assert max(after[k].max() for k in bands) <= 1e-3
+    refined = {r["face"]: r for r in result.report.refinements}
+    assert all(refined[k]["between_before"] > 0.1 and refined[k]["between_after"] <= 1e-3 for k in bands)
+    check_result(result)
