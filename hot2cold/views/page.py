@@ -83,7 +83,7 @@ def _summary(report) -> str:
         ("largest displacement", f"{report.max_displacement:.4g} mm"),
     ]
     if report.tolerance is not None:
-        items.append(("tolerance", f"{report.tolerance:.3g} mm: "
+        items.append(("tolerance", f"{report.tolerance:.3g} mm{_widened(report)}: "
                       + _flag(bool(report.tolerance_met), "met", "NOT met")))
     return '<dl class="summary">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
 
@@ -137,14 +137,22 @@ def _checks(report) -> str:
     return solids + nodes + "".join(f"<p>{_e(n)}</p>" for n in notes)
 
 
+def _widened(report) -> str:
+    """`` + A mm for the field's scatter (S mm)`` where the scatter widens the tolerance noticeably, else ""."""
+    if report.tolerance is None or report.allowance <= 0.1 * report.tolerance:
+        return ""
+    return f" + {report.allowance:.3g} mm for the field's scatter ({report.scatter:.3g} mm about a smooth field)"
+
+
 def _tolerance(report) -> str:
     parts = []
     if report.tolerance is None:
         parts.append("<p>No tolerance was set: faces keep their hot control nets (no refinement).</p>")
     else:
-        parts.append(f"<p>Tolerance {report.tolerance:.3g} mm: "
+        strict = " Knots kept (<code>--keep-knots</code>): nothing refined." if report.keep_knots else ""
+        parts.append(f"<p>Tolerance {report.tolerance:.3g} mm{_widened(report)}: "
                      f"{_flag(bool(report.tolerance_met), 'met', 'NOT met')} "
-                     f"(largest Δmax {_mm(report.delta_max)} mm).</p>")
+                     f"(largest Δmax {_mm(report.delta_max)} mm).{strict}</p>")
     if report.refinements:
         rows = []
         for r in report.refinements:
