@@ -46,8 +46,8 @@ class Settings:
         The largest error (mm) accepted, at the nodes and between them where the nodes tell the field
         (:mod:`hot2cold.pipeline.refine`), beyond what the field's own scatter allows.  Faces and edges whose
         fit misses it are refined by knot insertion and degree elevation (the hot shape is kept exactly) and
-        fitted again.  The default, 1e-3 mm, is the paper's accuracy on the aerofoils (Table 1: Δmax 1e-3
-        mm, Δmean 1e-4) and a tenth of the tightest profile tolerances of compressor aerofoils (about
+        fitted again.  The default, 1e-3 mm, is the paper's accuracy on its aerofoil (Table 1: Δmax 1e-4 to 2e-3
+        mm, Δmean 6e-6 to 9e-5) and a tenth of the tightest profile tolerances of compressor aerofoils (about
         0.01 mm): a fixed length rather than a share of the displacement, since what manufacturing accepts
         does not grow with how far the part moves.  None: no tolerance (nothing refined, nothing checked).
     keep_knots : bool
