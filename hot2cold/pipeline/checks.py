@@ -401,7 +401,9 @@ class FaceGrid:
 GRID_REACH = 2.0
 #: The slack of a grid point is the estimate's largest miss at this many nearest nodes.
 _SLACK_NODES = 8
-#: A face whose own nodes (with its edges' and vertices') are fewer than this is estimated from every node.
+#: A face with fewer nodes of its own than this is estimated from every node: the nodes of its edges alone lie
+#: along curves (an arc, a line), and an estimate over them extrapolates across the face (a cylinder strip of
+#: a NIST part without nodes of its own: 93 mm off 70 mm up from the arc that held them).
 _FACE_ESTIMATE_MIN = 10
 
 
@@ -409,16 +411,16 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                estimator: Callable[[np.ndarray], np.ndarray], neighbours: int) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part``, ``CHECK_SPACING`` x the part's diagonal apart.
 
-    Near the face's own nodes (those of the face, its edges and its vertices; within ``GRID_REACH`` times
-    their median spacing) the points are moved by a :class:`~hot2cold.pipeline.artificial.FieldEstimator`
-    over those nodes (``neighbours`` nearest), elsewhere by ``estimator`` (over every node).  A thin wall's two
-    sides are nearer each other than the nodes' spacing, and an estimate over every node mixed the field of
-    the far side in: on the bundled mixer segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own
-    nodes.  Away from its own nodes a face's estimate extrapolates (1 mm off on faces of an ANSYS air
-    volume with a few nodes each), and the estimate over every node, which has nodes all around, is the
-    better one.  The hot surfaces' parameters stay valid through the refinement to a tolerance (knot
-    insertion and degree elevation keep the surface), so one set of grids serves it and the checks of the
-    cold part."""
+    On a face with at least ``_FACE_ESTIMATE_MIN`` nodes of its own, the points near its nodes (those of the
+    face, its edges and its vertices; within ``GRID_REACH`` times their median spacing) are moved by a
+    :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (``neighbours`` nearest); the
+    others by ``estimator`` (over every node).  A thin wall's two sides are nearer each other than the
+    nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
+    segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and
+    where its nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the
+    estimate over every node, which has nodes all around, is the better one.  The hot surfaces' parameters
+    stay valid through the refinement to a tolerance (knot insertion and degree elevation keep the
+    surface), so one set of grids serves it and the checks of the cold part."""
     from .artificial import FieldEstimator
 
     spacing = CHECK_SPACING * part.diagonal
@@ -433,11 +435,11 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                                + [classification.nodes_of(Role.EDGE, e) for e in sorted(edges)]
                                + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
         feet = np.unique(classification.foot[nodes], axis=0)
-        if len(uv) and len(feet) >= _FACE_ESTIMATE_MIN:
+        if len(uv) and len(feet) > 1:
             tree = cKDTree(feet)
             reach = GRID_REACH * float(np.median(tree.query(feet, k=2)[0][:, 1]))
             near = tree.query(hot, distance_upper_bound=reach)[0] < np.inf
-            if near.any():
+            if near.any() and len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN:
                 local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
                 expected[near] = hot[near] + local(hot[near])
                 misses = np.linalg.norm(local(classification.foot[nodes]) - field.displacements[nodes], axis=1)
