@@ -1,7 +1,8 @@
 """The hot-to-cold morph, end to end, in the order of the paper.
 
 load -> classify nodes -> edges (one tangent plane at the corners of tangent edges) -> faces (with
-artificial nodes; refined to a tolerance if one is set) -> G1 -> rebuild -> sew -> check -> report
+artificial nodes; refined to the tolerance, 1e-3 mm by default, unless the knots are kept) -> G1 -> rebuild ->
+sew -> check -> report
 
 The input is checked on the way (an open hot solid, a field that misses the part or some of its faces) and
 so is the cold part after the sew (a face folded over, a solid turned inside out or crossing itself):
