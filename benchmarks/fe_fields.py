@@ -676,16 +676,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {CASES}")
     parser.add_argument("--variants", default=",".join(VARIANTS), help=f"comma-separated, of {VARIANTS}")
-    parser.add_argument("--timeout", type=float, default=900.0, help="seconds per morph run (default 900)")
-    parser.add_argument("--max-memory", type=float, default=8.0, metavar="GB",
-                        help="address-space limit of each run (default 8 GB; 0: none)")
-    parser.add_argument("--json", type=Path, help="save the runs here")
-    parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
-                        help="print the tables of runs saved with --json (several files: joined), run nothing")
-    parser.add_argument("--morph-args", default="", metavar="ARGS",
-                        help="extra options of every morph, one string (e.g. --morph-args='--keep-knots')")
-    parser.add_argument("--one", help=argparse.SUPPRESS)          # child: one run
-    parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
+    real_parts.run_arguments(parser, 900.0)
     args = parser.parse_args(argv)
     morph_args = tuple(args.morph_args.split())
     variants = _names(args.variants, VARIANTS, "variant", parser)

@@ -437,21 +437,27 @@ def select(paths: list[Path], names: str | None) -> list[Path]:
     return [p for p in paths if any(w in p.name.lower() for w in wanted)]
 
 
+def run_arguments(parser: argparse.ArgumentParser, timeout: float) -> None:
+    """The options every benchmark of runs in child processes takes (this one and ``fe_fields.py``): time and
+    memory limits per run, ``--json``/``--show``, ``--morph-args``, and the child's own ``--one``/``--workdir``."""
+    parser.add_argument("--timeout", type=float, default=timeout, help=f"seconds per run (default {timeout:g})")
+    parser.add_argument("--max-memory", type=float, default=8.0, metavar="GB",
+                        help="address-space limit of each run (default 8 GB; 0: none)")
+    parser.add_argument("--json", type=Path, help="save the runs here")
+    parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
+                        help="print the tables of runs saved with --json (several files: joined), run nothing")
+    parser.add_argument("--morph-args", default="", metavar="ARGS",
+                        help="extra options of every morph, one string (e.g. --morph-args='--keep-knots')")
+    parser.add_argument("--one", help=argparse.SUPPRESS)                    # child: one run
+    parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", help="comma-separated parts of file names (default: all)")
     parser.add_argument("--fields", default=",".join(FIELDS), help=f"comma-separated, of {FIELDS}")
     parser.add_argument("--nodes", default=",".join(NODES), help=f"comma-separated node sets, of {NODES}")
-    parser.add_argument("--timeout", type=float, default=600.0, help="seconds per run (default 600)")
-    parser.add_argument("--max-memory", type=float, default=8.0, metavar="GB",
-                        help="address-space limit of each run (default 8 GB; 0: none)")
-    parser.add_argument("--json", type=Path, help="save the runs here")
-    parser.add_argument("--show", type=Path, nargs="+", metavar="JSON",
-                        help="print the scoreboard of runs saved with --json (several files: joined), run nothing")
-    parser.add_argument("--morph-args", default="", metavar="ARGS",
-                        help="extra options of every morph, one string (e.g. --morph-args='--keep-knots')")
-    parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)          # child: one run
-    parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
+    run_arguments(parser, 600.0)
     args = parser.parse_args(argv)
     morph_args = tuple(args.morph_args.split())
     fields = [f for f in args.fields.split(",") if f]
@@ -468,7 +474,7 @@ def main(argv=None) -> int:
         print(scoreboard(runs))
         return 0
     if args.one is not None:
-        run = run_here(args.one, kinds[0], fields[0], args.workdir, morph_args)
+        run = run_here(Path(args.one), kinds[0], fields[0], args.workdir, morph_args)
         args.json.write_text(json.dumps(asdict(run)))
         return 0
 

@@ -1,6 +1,9 @@
 """Shared fixtures: the bundled sample parts and FE-like node sets on them."""
 from __future__ import annotations
 
+import contextlib
+import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +13,8 @@ from hot2cold.core.bspline import evaluate_surface
 from hot2cold.kernel.sampling import face_samples, fe_surface_nodes, volume_nodes
 from hot2cold.kernel.step import read_step
 
-SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "sample_parts"
 
 
 @pytest.fixture(scope="session")
@@ -72,3 +76,18 @@ def blade():
     from hot2cold.pipeline.morph import morph
     return morph(SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv")
 
+
+
+@contextlib.contextmanager
+def benchmark_module(name: str):
+    """``benchmarks/<name>.py`` imported as the module ``name`` for the duration (a benchmark script is no
+    package module); it and the benchmark module it imports (``real_parts``) are forgotten afterwards."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module          # dataclasses look their module up while it is made
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(spec.name, None)
+        sys.modules.pop("real_parts", None)

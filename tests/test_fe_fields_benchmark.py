@@ -8,14 +8,10 @@
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from conftest import benchmark_module
 
 #: gmsh's midside nodes 4..9 of a 10-node tetrahedron are on these edges.
 EDGES = [(0, 1), (1, 2), (2, 0), (0, 3), (2, 3), (1, 3)]
@@ -23,15 +19,8 @@ EDGES = [(0, 1), (1, 2), (2, 0), (0, 3), (2, 3), (1, 3)]
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("fe_fields", ROOT / "benchmarks" / "fe_fields.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module          # dataclasses look their module up while it is made
-    try:
-        spec.loader.exec_module(module)
+    with benchmark_module("fe_fields") as module:
         yield module
-    finally:
-        sys.modules.pop(spec.name, None)
-        sys.modules.pop("real_parts", None)
 
 
 def two_tets(bulge: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -8,13 +8,13 @@
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from conftest import benchmark_module
 
 from hot2cold.kernel.step import read_step
 
@@ -24,14 +24,8 @@ BLOCK = ROOT / "sample_parts" / "filleted_block.step"
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("real_parts", ROOT / "benchmarks" / "real_parts.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module          # dataclasses look their module up while it is made
-    try:
-        spec.loader.exec_module(module)
+    with benchmark_module("real_parts") as module:
         yield module
-    finally:
-        sys.modules.pop(spec.name, None)
 
 
 @pytest.fixture(scope="module")
