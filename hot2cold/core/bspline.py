@@ -395,6 +395,11 @@ def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
     return curve_basis(curve, t) @ curve.poles
 
 
+def polyline_length(points: np.ndarray) -> float:
+    """Length of the polyline through ``points (m, 3)`` (the length of a curve sampled densely enough)."""
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
 def evaluate_surface(surface: BSplineSurface, u, v) -> np.ndarray:
     """Points ``S(u, v)`` (m, 3) of ``surface`` at parameters ``u``, ``v`` (m,)."""
     return surface_basis(surface, u, v) @ surface.poles.reshape(-1, 3)

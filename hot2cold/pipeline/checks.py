@@ -428,7 +428,8 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     for face in part.faces:
         uv = face_grid(face, spacing, projector)
         hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
-        expected, slack, near = hot + estimator(hot), np.zeros(len(uv)), np.zeros(len(uv), bool)
+        expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
+        own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
         edges = {use.edge for use in face.uses}
         vertices = {v for e in edges for v in part.edges[e].vertices}
         nodes = np.concatenate([classification.nodes_of(Role.FACE, face.index)]
@@ -440,12 +441,15 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
             reach = GRID_REACH * float(np.median(tree.query(feet, k=2)[0][:, 1]))
             near = tree.query(hot, distance_upper_bound=reach)[0] < np.inf
             if near.any() and len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN:
+                own = near
                 local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
-                expected[near] = hot[near] + local(hot[near])
+                expected[near] += local(hot[near])
                 misses = np.linalg.norm(local(classification.foot[nodes]) - field.displacements[nodes], axis=1)
                 closest = cKDTree(classification.foot[nodes]).query(
                     hot[near], k=min(_SLACK_NODES, len(nodes)))[1].reshape(int(near.sum()), -1)
                 slack[near] = misses[closest].max(axis=1)
+        if (~own).any():
+            expected[~own] += estimator(hot[~own])
         grids.append(FaceGrid(uv, hot, expected, slack, near))
     return grids
 

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..core.bspline import evaluate_curve, evaluate_surface, surface_normals
+from ..core.bspline import evaluate_curve, evaluate_surface, polyline_length, surface_normals
 from ..io.field import DisplacementField
 from ..core.footpoint import project_to_surface
 from ..core.domain import Trim
@@ -111,8 +111,7 @@ def _dense(uv: np.ndarray, spacing: float, face) -> np.ndarray:
 
 def curve_length(curve) -> float:
     """Length (mm) of ``curve``, as a polyline of 33 points."""
-    p = evaluate_curve(curve, np.linspace(*curve.domain, 33))
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+    return polyline_length(evaluate_curve(curve, np.linspace(*curve.domain, 33)))
 
 
 def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: float, margin: float,

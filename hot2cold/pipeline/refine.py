@@ -46,7 +46,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
-                            refine_curve, refine_surface, surface_derivatives)
+                            polyline_length, refine_curve, refine_surface, surface_derivatives)
 from ..core.footpoint import curve_distances
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
 from ..io.field import DisplacementField
@@ -382,11 +382,6 @@ def _spans(breaks: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
 
 
-def _polyline_length(points: np.ndarray) -> float:
-    """Length (mm) of the polyline through ``points (m, 3)``."""
-    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-
-
 def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, spacing: float) -> tuple[np.ndarray, bool]:
     """Where an edge is refined: the midpoints of the knot spans holding a bad node whose halves stay at least
     ``MIN_SPAN_SPACINGS * spacing`` (mm) long, and whether it is raised to ``REFINED_DEGREE`` (it has a bad
@@ -396,7 +391,7 @@ def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, spacing: fl
     for r in np.unique(_spans(breaks, t[bad])):
         lo, hi = breaks[r], breaks[r + 1]
         mid = 0.5 * (lo + hi)
-        if _polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= MIN_SPAN_SPACINGS * spacing:
+        if polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= MIN_SPAN_SPACINGS * spacing:
             mids.append(mid)
     return np.array(mids), bool(bad.any() and curve.degree < REFINED_DEGREE)
 
@@ -421,7 +416,7 @@ def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, spacin
         lengths = []
         for axis in (0, 1):
             along, across = np.linspace(*ends[axis], 17), np.full(17, ends[1 - axis].mean())
-            lengths.append(_polyline_length(evaluate_surface(surface, *((along, across) if axis == 0
+            lengths.append(polyline_length(evaluate_surface(surface, *((along, across) if axis == 0
                                                                         else (across, along)))))
         for axis in (0, 1):
             if lengths[axis] >= 0.5 * max(lengths) and lengths[axis] / 2 >= MIN_SPAN_SPACINGS * spacing:
