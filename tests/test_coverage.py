@@ -14,7 +14,7 @@ import pytest
 
 from hot2cold.cli import main
 from hot2cold.kernel.sampling import fe_surface_nodes
-from hot2cold.core.model import Role
+from hot2cold.core.model import Classification, Role
 from hot2cold.kernel.tessellate import tessellate
 from hot2cold.pipeline.morph import morph
 from hot2cold.testing.synthetic import AffineField
@@ -131,7 +131,6 @@ def test_a_vertex_holds_the_nodes_at_the_ends_of_its_other_edges():
     at each top corner, classified to those edges."""
     import cadquery as cq
 
-    from hot2cold.core.model import Classification
     from hot2cold.pipeline.checks import face_coverage
     from hot2cold.pipeline.load import load_part
     from hot2cold.settings import Settings
@@ -191,3 +190,24 @@ def test_a_node_on_a_vertex_or_edge_that_no_face_takes_is_still_the_vertex_or_ed
     assert np.all(cls.role[nv:nv + 3] == Role.EDGE)
     np.testing.assert_allclose(cls.foot[nv:nv + 3], mid_edge, atol=1e-9)
     assert np.all(cls.role[nv + 3:] == Role.IGNORED)
+
+
+def test_node_spacing_is_that_of_the_field_around_a_few_sparse_nodes():
+    """A face with nodes only at its corners, 150 mm apart, among nodes 1 mm apart: its spacing is 1 mm (the
+    grid points near its nodes are those next to the corners, not the whole face).  Shared foot points count
+    once; ignored nodes have none."""
+    line = np.column_stack([np.arange(0.0, 151.0), np.zeros(151), np.zeros(151)])       # 1 mm apart
+    corners = np.array([[0.0, 0.5, 0.0], [150.0, 0.5, 0.0]])
+    foot = np.concatenate([line, line[:1], corners, [[np.nan] * 3]])                     # a shared foot point
+    n = len(foot)
+    role = np.full(n, Role.FACE)
+    role[-1] = Role.IGNORED
+    owner = np.zeros(n, int)
+    owner[-3:-1] = 1
+    cls = Classification(role, owner, np.zeros((n, 2)), np.full(n, np.nan), foot, np.zeros(n),
+                         node_distance=0.01, edge_distance=0.01)
+    assert np.isnan(cls.spacings[-1]) and cls.spacings[75] == pytest.approx(1.0)
+    assert cls.spacings[151] == cls.spacings[0] == pytest.approx(0.5)              # the corner is nearer
+    assert cls.spacing(cls.nodes_of(Role.FACE, 1)) == pytest.approx(0.5)
+    assert cls.spacing() == pytest.approx(1.0)
+    assert cls.spacing(np.array([n - 1])) == float("inf")

@@ -22,7 +22,7 @@ from hot2cold.kernel.step import read_step, write_step
 from hot2cold.pipeline.morph import check_result, morph
 from hot2cold.core.model import side_along
 from hot2cold.core.footpoint import curve_distances
-from hot2cold.pipeline.refine import face_distances
+from hot2cold.core.footpoint import surface_distances
 from hot2cold.settings import Settings
 
 from conftest import SAMPLES
@@ -117,7 +117,7 @@ def test_local_distances_match_the_kernel_projection():
     offset = RNG.uniform(-1e-3, 1e-3, 200)
     points = evaluate_surface(surface, u, v) + offset[:, None] * surface_normals(surface, u, v)
     start = np.column_stack([u, v]) + RNG.uniform(-0.01, 0.01, (200, 2))    # a foot point a little off
-    d = face_distances(surface, points, start)
+    d = surface_distances(surface, points, start)
     kernel = GeomAPI_ProjectPointOnSurf()
     kernel.Init(record_to_surface(surface), 0.0, 1.0, 0.0, 1.0)
     oracle = []

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve, evaluate_surface, surface_jet
+from .bspline import (BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve, evaluate_surface,
+                      surface_derivatives, surface_jet)
 
 #: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
 #: as Newton's method converges quadratically the error left is of the order of the step squared (1e-18 of
@@ -41,8 +42,8 @@ from .bspline import BSplineCurve, BSplineSurface, curve_derivative_basis, evalu
 STEP_RTOL = 1e-9
 #: Newton iterations at the most.
 MAX_ITERATIONS = 25
-#: Gauss-Newton steps of :func:`curve_distances`.
-CURVE_STEPS = 8
+#: Gauss-Newton steps of :func:`curve_distances` and :func:`surface_distances`.
+LOCAL_STEPS = 8
 #: Nodes evaluated together (bounds the memory of the jet: about 1 kB a node for bicubic patches).
 CHUNK = 65_536
 
@@ -150,12 +151,41 @@ def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> n
     lo, hi = curve.domain
     t = np.clip(np.array(t, float), lo, hi)
     best = np.full(len(points), np.inf)
-    for step in range(CURVE_STEPS + 1):
+    for step in range(LOCAL_STEPS + 1):
         r = points - evaluate_curve(curve, t)
         best = np.minimum(best, np.linalg.norm(r, axis=1))
-        if step == CURVE_STEPS:
+        if step == LOCAL_STEPS:
             break
         d = curve_derivative_basis(curve, t) @ curve.poles
         dd = np.sum(d * d, 1)
         t = np.clip(t + np.where(dd > 1e-300, np.sum(d * r, 1) / np.where(dd > 1e-300, dd, 1.0), 0.0), lo, hi)
+    return best
+
+
+def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, box=None) -> np.ndarray:
+    """Distances ``(m,)`` of ``points`` to ``surface`` by Gauss-Newton from the parameters ``uv (m, 2)``, kept
+    within ``box`` ``(u0, u1, v0, v1)`` (and the domain): the smallest distance met on the way, an upper
+    bound of the distance to the surface, and no larger than the start's (the local projection of eq. 21,
+    and where :func:`project_to_surface` does not settle, a bound tighter than the start)."""
+    points = np.asarray(points, float)
+    uv = np.array(uv, float).reshape(-1, 2)
+    u0, u1, v0, v1 = surface.domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    if box is not None:
+        lo, hi = np.maximum(lo, [box[0], box[2]]), np.minimum(hi, [box[1], box[3]])
+    uv = np.clip(uv, lo, hi)
+    best = np.full(len(points), np.inf)
+    for step in range(LOCAL_STEPS + 1):
+        r = points - evaluate_surface(surface, uv[:, 0], uv[:, 1])
+        best = np.minimum(best, np.linalg.norm(r, axis=1))
+        if step == LOCAL_STEPS:
+            break
+        su, sv = surface_derivatives(surface, uv[:, 0], uv[:, 1])
+        a, b, c = np.sum(su * su, 1), np.sum(su * sv, 1), np.sum(sv * sv, 1)
+        det = a * c - b * b
+        ok = det > 1e-300
+        det = np.where(ok, det, 1.0)
+        ru, rv = np.sum(su * r, 1), np.sum(sv * r, 1)
+        step_uv = np.column_stack([(c * ru - b * rv) / det, (a * rv - b * ru) / det]) * ok[:, None]
+        uv = np.clip(uv + step_uv, lo, hi)
     return best

@@ -11,6 +11,7 @@ filled by :mod:`hot2cold.pipeline.classify`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from enum import Enum, IntEnum
 from typing import Any
 
@@ -236,3 +237,26 @@ class Classification:
     def used(self) -> np.ndarray:
         """Mask ``(N,)`` of the nodes that take part."""
         return self.role != Role.IGNORED
+
+    @cached_property
+    def spacings(self) -> np.ndarray:
+        """Distance (mm) from each used node's foot point to the nearest other foot point ``(N,)`` (NaN for
+        unused nodes, and for all where fewer than two foot points are distinct): the field's node spacing
+        there.  Nodes that share a foot point count once."""
+        from scipy.spatial import cKDTree
+
+        used = np.flatnonzero(self.used)
+        nearest = np.full(len(self.role), np.nan)
+        feet = np.unique(self.foot[used], axis=0)
+        if len(feet) > 1:
+            nearest[used] = cKDTree(feet).query(self.foot[used], k=2)[0][:, 1]
+        return nearest
+
+    def spacing(self, nodes: np.ndarray | None = None) -> float:
+        """The node spacing (mm) of ``nodes`` (all used nodes if None): the median of their
+        :attr:`spacings`, inf where none is known.  Over a face's nodes it is the spacing of the field around
+        them however few they are (a plane of a tessellated part with nodes only at its six corners, 150 mm
+        apart, has the spacing of the nodes next to those corners)."""
+        values = self.spacings if nodes is None else self.spacings[nodes]
+        values = values[np.isfinite(values)]
+        return float(np.median(values)) if len(values) else float("inf")

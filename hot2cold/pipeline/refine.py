@@ -43,11 +43,10 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from scipy.spatial import cKDTree
 
 from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
-                            polyline_length, refine_curve, refine_surface, surface_derivatives)
-from ..core.footpoint import curve_distances
+                            polyline_length, refine_curve, refine_surface)
+from ..core.footpoint import curve_distances, surface_distances
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
 from ..io.field import DisplacementField
 from .checks import FaceGrid
@@ -58,9 +57,6 @@ log = logging.getLogger(__name__)
 
 #: Degree a refined direction is raised to when it is lower.
 REFINED_DEGREE = 3
-
-#: Gauss-Newton steps of the local projections.
-_NEWTON_STEPS = 8
 
 #: A knot span is halved only while each half stays at least this many node spacings long on the part: finer
 #: spans would be decided by the artificial nodes (the field's local estimate) rather than by the nodes.
@@ -130,34 +126,6 @@ class RefineResult:
 # Errors: local projections (eq. 21) and edge gaps.
 # ----------------------------------------------------------------------------------------------------------
 
-def face_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, box=None) -> np.ndarray:
-    """Distances ``(m,)`` of ``points`` to ``surface`` by Gauss-Newton from the parameters ``uv (m, 2)``, kept
-    within ``box`` ``(u0, u1, v0, v1)`` (and the domain): the smallest distance met on the way, an upper
-    bound of the distance to the surface."""
-    points = np.asarray(points, float)
-    uv = np.array(uv, float).reshape(-1, 2)
-    u0, u1, v0, v1 = surface.domain
-    lo, hi = np.array([u0, v0]), np.array([u1, v1])
-    if box is not None:
-        lo, hi = np.maximum(lo, [box[0], box[2]]), np.minimum(hi, [box[1], box[3]])
-    uv = np.clip(uv, lo, hi)
-    best = np.full(len(points), np.inf)
-    for step in range(_NEWTON_STEPS + 1):
-        r = points - evaluate_surface(surface, uv[:, 0], uv[:, 1])
-        best = np.minimum(best, np.linalg.norm(r, axis=1))
-        if step == _NEWTON_STEPS:
-            break
-        su, sv = surface_derivatives(surface, uv[:, 0], uv[:, 1])
-        a, b, c = np.sum(su * su, 1), np.sum(su * sv, 1), np.sum(sv * sv, 1)
-        det = a * c - b * b
-        ok = det > 1e-300
-        det = np.where(ok, det, 1.0)
-        ru, rv = np.sum(su * r, 1), np.sum(sv * r, 1)
-        step_uv = np.column_stack([(c * ru - b * rv) / det, (a * rv - b * ru) / det]) * ok[:, None]
-        uv = np.clip(uv + step_uv, lo, hi)
-    return best
-
-
 @dataclass(frozen=True, eq=False)
 class Targets:
     """Where the refinement measures each face and edge, besides the nodes (lengths in mm).
@@ -186,21 +154,14 @@ class Targets:
 
     @classmethod
     def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid]) -> Targets:
-        """The targets of a classified field: node spacings (median distance from each used node's foot point
-        to the nearest other one, over the nodes of a face and its edges, or of an edge; the median over all
-        where there are none) and the grid points of ``grids`` near the nodes of faces their own nodes do
-        not determine."""
-        used = np.flatnonzero(classification.used)
-        feet = np.unique(classification.foot[used], axis=0)
-        nearest = np.full(len(classification.used), np.nan)
-        if len(feet) > 1:
-            nearest[used] = cKDTree(feet).query(classification.foot[used], k=2)[0][:, 1]
-        overall = float(np.nanmedian(nearest)) if np.isfinite(nearest).any() else np.inf
+        """The targets of a classified field: node spacings (:meth:`Classification.spacing` of the nodes of a
+        face and its edges, or of an edge; of all nodes where there are none) and the grid points of
+        ``grids`` near the nodes of faces their own nodes do not determine."""
+        overall = classification.spacing()
 
         def median(nodes: np.ndarray) -> float:
-            values = nearest[nodes]
-            values = values[np.isfinite(values)]
-            return float(np.median(values)) if len(values) else overall
+            spacing = classification.spacing(nodes)
+            return spacing if np.isfinite(spacing) else overall
 
         edge_spacing = np.array([median(classification.nodes_of(Role.EDGE, e.index)) for e in part.edges])
         face_spacing = np.array([median(np.concatenate(
@@ -241,14 +202,14 @@ def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: Displ
     ``grid`` points, and of its cold edges at their pcurves' points (the gap the sew would have to close)."""
     nodes = cls.nodes_of(Role.FACE, face.index)
     target = cls.foot[nodes] + field.displacements[nodes]
-    at_nodes = face_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
-    off = face_distances(morph.surface, grid.expected, grid.uv, face.uv_box)
+    at_nodes = surface_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
+    off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box)
     uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
     for use in face.uses:
         if edges[use.edge].degenerate:
             continue
         uv.append(use.uv)
-        error.append(face_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
+        error.append(surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
                                     face.uv_box))
     between = np.concatenate(error[1:])
     return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
@@ -258,7 +219,10 @@ def _largest(err: np.ndarray) -> float:
     return float(err.max()) if len(err) else 0.0
 
 
-def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField):
+def edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """An edge's nodes' hot parameters ``(m,)`` and the distances ``(m,)`` (mm) of their cold targets to the
+    morphed curve (eq. 21, a local projection from the hot parameters); empty for a degenerate edge."""
     nodes = cls.nodes_of(Role.EDGE, edge.index)
     if edge.degenerate or not len(nodes):
         return np.zeros(0), np.zeros(0)
@@ -475,7 +439,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     def errors():
         fe = [_face_errors(f, m, cls, field, g, edge_morphs, part.edges)
               for f, m, g in zip(part.faces, face_morphs, targets.grids)]
-        ee = [_edge_errors(e, m, cls, field) for e, m in zip(part.edges, edge_morphs)]
+        ee = [edge_errors(e, m, cls, field) for e, m in zip(part.edges, edge_morphs)]
         return fe, ee
 
     def worst(err):
