@@ -27,7 +27,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, FieldEstimator, carry_to_feet
-from .checks import FaceGrid, FieldScale, check_cold, check_coverage, check_hot, check_result, face_grids
+from .checks import (FaceGrid, FieldScale, check_cold, check_coverage, check_hot, check_result, edge_grids,
+                     face_grids)
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
@@ -319,8 +320,8 @@ class MorphContext:
         uv = np.concatenate([self.classification.uv[nodes], grid.uv])
         if not len(uv):
             return ""
-        was = float(surface_distances(before, targets, uv, box).max())
-        now = float(surface_distances(after, targets, uv, box).max())
+        was = float(surface_distances(before, targets, uv, box, past_border=True).max())
+        now = float(surface_distances(after, targets, uv, box, past_border=True).max())
         if now <= max(limit, was):
             return ""
         return (f"turning face {k} would take it {now:.2g} mm off the field (tolerance {limit:g} mm, "
@@ -442,14 +443,18 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
 
     # refinement to the tolerance (beyond the paper; not with keep_knots): knots and cubic degree where the
     # error at the nodes or between them misses it; from here on the context's part is the refined hot part
-    # (same shape, same parameters: the grids over the faces stay valid)
+    # (same shape, same parameters), and the refined faces have grids of their own
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours)
     refinements, edge_refinements = (), ()
     if settings.tolerance is not None and not settings.keep_knots:
-        targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids)
+        targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids,
+                             edge_grids(context.part, cls, field, context.estimator))
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
-                         context.fit_face, context.refit_edges)
+                         context.fit_face, context.refit_edges,
+                         lambda part, faces: face_grids(part, projector, cls, field, context.estimator,
+                                                        settings.vertex_neighbours, faces))
         context = replace(context, part=refined.part)
+        grids = [refined.grids.get(k, grid) for k, grid in enumerate(grids)]
         face_morphs, edge_morphs = refined.faces, refined.edges
         refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
         stages.lap("refine")

@@ -49,7 +49,7 @@ from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evalua
 from ..core.footpoint import curve_distances, surface_distances
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
 from ..io.field import DisplacementField
-from .checks import FaceGrid
+from .checks import EdgeGrid, FaceGrid
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 
@@ -108,11 +108,14 @@ class EdgeRefinement:
     rounds: int
     delta_max_before: float
     delta_max_after: float
+    between_before: float = 0.0
+    between_after: float = 0.0
 
 
 @dataclass(eq=False)
 class RefineResult:
-    """The refined part (hot geometry, refined faces and edges), the new morphs and what was done."""
+    """The refined part (hot geometry, refined faces and edges), the new morphs, what was done, and the grids
+    of the refined faces (index -> :class:`FaceGrid` over the refined surface)."""
 
     part: Part
     faces: list[FaceMorph]
@@ -120,6 +123,7 @@ class RefineResult:
     face_refinements: list[Refinement]
     edge_refinements: list[EdgeRefinement]
     rounds: int
+    grids: dict[int, FaceGrid]
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -145,18 +149,23 @@ class Targets:
         than the fit where the nodes determine the face, and worse where it reaches past the nodes (on the
         twisted blade, 1.2 mm into a hole in the nodes it was 7e-3 mm off, and the face refined after it
         6e-3 mm worse there than the fit of the hot knots).
+    edge_grids : list of :class:`~hot2cold.pipeline.checks.EdgeGrid`, per edge the points along it near the
+        nodes around it where its own nodes do not outnumber its poles twice, with the field's estimate there.
     """
 
     limit: float
     face_spacing: np.ndarray
     edge_spacing: np.ndarray
     grids: list[FaceGrid]
+    edge_grids: list[EdgeGrid]
 
     @classmethod
-    def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid]) -> Targets:
+    def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid],
+           edge_grids: list[EdgeGrid]) -> Targets:
         """The targets of a classified field: node spacings (:meth:`Classification.spacing` of the nodes of a
         face and its edges, or of an edge; of all nodes where there are none) and the grid points of
-        ``grids`` near the nodes of faces their own nodes do not determine."""
+        ``grids`` near the nodes of faces their own nodes do not determine, and ``edge_grids`` (one per
+        edge, :func:`~hot2cold.pipeline.checks.edge_grids`)."""
         overall = classification.spacing()
 
         def median(nodes: np.ndarray) -> float:
@@ -167,10 +176,23 @@ class Targets:
         face_spacing = np.array([median(np.concatenate(
             [classification.nodes_of(Role.FACE, f.index)]
             + [classification.nodes_of(Role.EDGE, use.edge) for use in f.uses])) for f in part.faces])
-        near = [grid.take(grid.near if len(classification.nodes_of(Role.FACE, face.index))
-                          < np.prod(face.surface.shape) else np.zeros(len(grid.uv), bool))
-                for face, grid in zip(part.faces, grids)]
-        return cls(limit, face_spacing, edge_spacing, near)
+        return cls(limit, face_spacing, edge_spacing,
+                   [_measured(f, classification, g) for f, g in zip(part.faces, grids)], list(edge_grids))
+
+    def with_grids(self, part: Part, classification: Classification, grids: dict[int, FaceGrid]) -> Targets:
+        """The same targets with the grids of the faces ``grids`` (index -> the :class:`FaceGrid` of the face
+        of ``part``, refined) in place of theirs."""
+        measured = list(self.grids)
+        for k, grid in grids.items():
+            measured[k] = _measured(part.faces[k], classification, grid)
+        return replace(self, grids=measured)
+
+
+def _measured(face: Face, classification: Classification, grid: FaceGrid) -> FaceGrid:
+    """The points of ``grid`` the refinement measures ``face`` at: those near its nodes where its own nodes
+    are fewer than its poles, none where they determine it (:class:`Targets`)."""
+    few = len(classification.nodes_of(Role.FACE, face.index)) < np.prod(face.surface.shape)
+    return grid.take(grid.near if few else np.zeros(len(grid.uv), bool))
 
 
 def noise_allowance(scatter: float, nodes: int) -> float:
@@ -202,8 +224,8 @@ def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: Displ
     ``grid`` points, and of its cold edges at their pcurves' points (the gap the sew would have to close)."""
     nodes = cls.nodes_of(Role.FACE, face.index)
     target = cls.foot[nodes] + field.displacements[nodes]
-    at_nodes = surface_distances(morph.surface, target, cls.uv[nodes], face.uv_box)
-    off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box)
+    at_nodes = surface_distances(morph.surface, target, cls.uv[nodes], face.uv_box, past_border=True)
+    off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
     uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
     for use in face.uses:
         if edges[use.edge].degenerate:
@@ -217,6 +239,27 @@ def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: Displ
 
 def _largest(err: np.ndarray) -> float:
     return float(err.max()) if len(err) else 0.0
+
+
+class EdgeErrors(NamedTuple):
+    """An edge's errors (mm) and where they are: at its nodes (eq. 21) and at the points of its
+    :class:`EdgeGrid` (less their slack).  ``t`` and ``error`` hold all of them, for the marks; ``nodes`` and
+    ``between`` the largest of each kind (0 where there are none)."""
+
+    t: np.ndarray
+    error: np.ndarray
+    nodes: float
+    between: float
+
+
+def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField,
+                 grid: EdgeGrid) -> EdgeErrors:
+    t, at_nodes = edge_errors(edge, morph, cls, field)
+    if edge.degenerate or not len(grid.t):
+        return EdgeErrors(t, at_nodes, _largest(at_nodes), 0.0)
+    off = np.maximum(curve_distances(morph.curve, grid.expected, grid.t) - grid.slack, 0.0)
+    return EdgeErrors(np.concatenate([t, grid.t]), np.concatenate([at_nodes, off]), _largest(at_nodes),
+                      _largest(off))
 
 
 def edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField
@@ -414,18 +457,21 @@ def _dedupe(s: np.ndarray, tol: float = 1e-12) -> np.ndarray:
 
 FitFace = Callable[[Part, Face, list[EdgeMorph]], FaceMorph]
 FitEdges = Callable[[Part, list[EdgeMorph], set[int]], list[EdgeMorph]]
+Regrid = Callable[[Part, list[int]], list[FaceGrid]]
 
 
 def refine(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
            edge_morphs: list[EdgeMorph], targets: Targets, max_rounds: int, fit_face: FitFace,
-           fit_edges: FitEdges) -> RefineResult:
+           fit_edges: FitEdges, regrid: Regrid) -> RefineResult:
     """Refine faces and edges until every error is within ``targets.limit`` mm or ``max_rounds`` are done.
 
     ``fit_face(part, face, edge_morphs) -> FaceMorph`` fits a face of a (refined) part against the given edge
     morphs;
     ``fit_edges(part, edge_morphs, refined) -> edge_morphs`` fits the edges in the set ``refined`` again and
     returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose curve
-    object changes counts as changed).  Returns the refined part
+    object changes counts as changed);
+    ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of each of the (refined) ``faces`` of
+    ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`).  Returns the refined part
     (hot geometry, same shape), the final morphs and one record per face and edge that was refined or missed.
     """
     limit = targets.limit
@@ -435,25 +481,27 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     edge_added = np.zeros(len(part.edges), int)
     face_rounds = np.zeros(len(part.faces), int)
     edge_rounds = np.zeros(len(part.edges), int)
+    grids: dict[int, FaceGrid] = {}
+
+    def face_errors(k: int) -> FaceErrors:
+        return _face_errors(part.faces[k], face_morphs[k], cls, field, targets.grids[k], edge_morphs, part.edges)
 
     def errors():
-        fe = [_face_errors(f, m, cls, field, g, edge_morphs, part.edges)
-              for f, m, g in zip(part.faces, face_morphs, targets.grids)]
-        ee = [edge_errors(e, m, cls, field) for e, m in zip(part.edges, edge_morphs)]
-        return fe, ee
+        return ([face_errors(k) for k in range(len(part.faces))],
+                [_edge_errors(e, m, cls, field, g) for e, m, g in zip(part.edges, edge_morphs, targets.edge_grids)])
 
     def worst(err):
         return float(err.max()) if len(err) else 0.0
 
     face_err, edge_err = errors()
     face_before = [(e.nodes, e.between) for e in face_err]
-    edge_before = [worst(e) for _, e in edge_err]
+    edge_before = [(e.nodes, e.between) for e in edge_err]
     stuck_faces: set[int] = set()                # faces and edges that miss where no span may be halved
     stuck_edges: set[int] = set()
     rounds = 0
     while rounds < max_rounds:
         bad_faces = [k for k, e in enumerate(face_err) if worst(e.error) > limit]
-        bad_edges = [k for k, (_, e) in enumerate(edge_err) if worst(e) > limit]
+        bad_edges = [k for k, e in enumerate(edge_err) if worst(e.error) > limit]
         if not bad_faces and not bad_edges:
             stuck_faces, stuck_edges = set(), set()
             break
@@ -474,7 +522,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                 if up:
                     elevate.add(root)
         for e in bad_edges:
-            t, err = edge_err[e]
+            t, err = edge_err[e].t, edge_err[e].error
             mids, up = _edge_marks(part.edges[e].curve, t, err > limit, targets.edge_spacing[e])
             if not len(mids) and not up:
                 unplaced_edges.add(e)
@@ -515,6 +563,9 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         if not changed_faces and not changed_edges:
             break
         part = replace(part, faces=new_faces, edges=new_edges)
+        if changed_faces:
+            grids.update(zip(sorted(changed_faces), regrid(part, sorted(changed_faces))))
+            targets = targets.with_grids(part, cls, {k: grids[k] for k in changed_faces})
         fitted = fit_edges(part, edge_morphs, changed_edges)
         moved = changed_edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
         edge_morphs = list(fitted)
@@ -524,10 +575,13 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             face_morphs[k] = fit_face(part, part.faces[k], edge_morphs)
             face_rounds[k] += k in changed_faces
         rounds += 1
-        face_err, edge_err = errors()
+        for k in refit:                 # the others' errors stand: a face's depend on it and its edges only
+            face_err[k] = face_errors(k)
+        for e in moved:
+            edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
         log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", rounds,
                  len(changed_faces), len(changed_edges),
-                 max([worst(e.error) for e in face_err] + [worst(e) for _, e in edge_err] + [0.0]))
+                 max([worst(e.error) for e in face_err] + [worst(e.error) for e in edge_err] + [0.0]))
 
     face_reports = []
     for k, (face, hot) in enumerate(zip(part.faces, hot_faces)):
@@ -544,11 +598,12 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             face_before[k][1], face_err[k].between))
     edge_reports = []
     for e, (edge, hot) in enumerate(zip(part.edges, hot_edges)):
-        missed = edge_before[e] > limit
+        missed = max(edge_before[e]) > limit
         if edge.degenerate or (not missed and not edge_rounds[e]):
             continue
         edge_reports.append(EdgeRefinement(
-            e, missed, not (e in stuck_edges and worst(edge_err[e][1]) > limit),
+            e, missed, not (e in stuck_edges and worst(edge_err[e].error) > limit),
             int(edge_added[e]), hot.curve.degree, edge.curve.degree,
-            hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e], worst(edge_err[e][1])))
-    return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds)
+            hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e][0], edge_err[e].nodes,
+            edge_before[e][1], edge_err[e].between))
+    return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds, grids)

@@ -175,6 +175,8 @@ class Report:
                          f"{change}{stop}")
         for r in self.edge_refinements:
             change = f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
+            if r.get("between_before", 0.0) > (self.tolerance or 0.0):
+                change += f", between the nodes {r['between_before']:.2e} -> {r['between_after']:.2e} mm"
             if r["rounds"] == 0:
                 why = short if not r["refinable"] else "no round was run"
                 lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined: {why}")
