@@ -434,3 +434,34 @@ def test_distance_past_a_border_is_across_the_surface():
     uv = np.array([[1.0, 0.5], [0.5, 0.5]])
     assert surface_distances(surface, points, uv, past_border=True) == pytest.approx([0.01, 0.01])
     assert surface_distances(surface, points, uv) == pytest.approx([np.hypot(0.5, 0.01), 0.01])
+
+
+def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(blade_1mm):
+    """NIST CTC-04: edges refined to 9.7e-4 mm were turned at their corners afterwards and left their nodes by
+    1.6e-3 mm.  A turn (or a G1-corrected face) that takes an edge or face farther off its nodes than the
+    tolerance, and than its fit was, is refused with the reason; one that stays within is taken."""
+    from dataclasses import replace
+
+    from hot2cold.core.model import Role
+    from hot2cold.kernel.project import Projector
+    from hot2cold.pipeline.checks import FaceGrid
+    from hot2cold.pipeline.morph import MorphContext
+
+    shape, nodes = blade_1mm
+    result = morph(shape, (nodes, _bend(2e-4)(nodes)))
+    part, cls = result.part, result.classification
+    context = MorphContext.of(part, cls, result.field, Settings(), Projector(part.kernel.faces, part.kernel.edges))
+    e = max(range(len(part.edges)), key=lambda e: len(cls.nodes_of(Role.EDGE, e)))
+    k = max(range(len(part.faces)), key=lambda k: len(cls.nodes_of(Role.FACE, k)))
+    fit, surface = result.edges[e], result.faces[k].surface
+    grid = FaceGrid(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool))
+    chord = fit.curve.poles[-1] - fit.curve.poles[0]
+    across = np.cross(chord, [1.0, 0.0, 0.0] if abs(chord[0]) < 0.9 * np.linalg.norm(chord) else [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)                                      # a direction across the edge
+    u0, u1, v0, v1 = surface.domain
+    normal = surface_normals(surface, np.array([(u0 + u1) / 2]), np.array([(v0 + v1) / 2]))[0]
+    for shift, refused in ((2e-6, False), (5e-3, True)):
+        why = context._edge_moved_off(e, fit, replace(fit.curve, poles=fit.curve.poles + shift * across))
+        assert bool(why) == refused and (not refused or why.startswith(f"turning edge {e} would take it 0.00"))
+        why = context._moved_off(k, surface, surface.with_poles(surface.poles + shift * normal), grid)
+        assert bool(why) == refused and (not refused or why.startswith(f"turning face {k} would take it 0.00"))
