@@ -61,7 +61,9 @@ class Settings:
         principle, :func:`hot2cold.core.lstsq.solve_tsvd`).  A plain fit follows the noise, most where few
         nodes decide a pole (a thin leading edge).
     max_refinements : int
-        Rounds of refinement a face gets at the most.
+        Rounds of refinement a face gets at the most.  Each halves the spans that miss, so 8 rounds can cut a
+        hot span into 256; the refinement stops sooner where the spans reach the nodes' spacing.  (4 rounds
+        left the CalculiX field of the bundled twisted blade at 1.46e-3 mm; it met 1e-3 in 6.)
     g1_angle : float or None
         Edges where the hot faces meet within this angle (degrees) are tangent; after the morph their
         kink is corrected (paper section 5).  None: no G1 correction.
@@ -103,7 +105,7 @@ class Settings:
     tolerance: float | None = 1e-3
     keep_knots: bool = False
     smooth: bool = True
-    max_refinements: int = 4
+    max_refinements: int = 8
     g1_angle: float | None = 1.0
     blas_threads: int | None = None
     extrapolate: bool = False

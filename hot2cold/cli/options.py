@@ -145,7 +145,7 @@ class MorphOptions:
         "the tolerance is still checked (exit code 5 when it is not met)")
     max_refinements: int | None = _option(
         None, flag="--max-refinements", convert=to_count, type=int, metavar="N",
-        help="rounds of refinement to the tolerance at the most (default 4)")
+        help=f"rounds of refinement to the tolerance at the most (default {Settings.max_refinements})")
     node_distance: float | None = _option(
         None, flag="--node-distance", convert=to_number, type=float, metavar="MM",
         help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")

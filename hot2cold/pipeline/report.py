@@ -140,6 +140,11 @@ class Report:
             json.dump(self.to_dict(), fh, indent=2)
             fh.write("\n")
 
+    def _misses(self, refinement: dict) -> bool:
+        """Whether a face or edge refinement record still misses the tolerance (plus the noise allowance)."""
+        limit = (self.tolerance or math.inf) + (self.allowance or 0.0)
+        return max(refinement.get("delta_max_after", 0.0), refinement.get("between_after", 0.0)) > limit
+
     def table(self) -> str:
         """A short text table: per face as the paper's Table 1, then the overall checks."""
         lines = [f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}"]
@@ -169,7 +174,8 @@ class Report:
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r.get("degree_before", "") != r.get("degree_after", "") else "")
-            stop = "" if r.get("refinable", True) else f"; where it still misses, {short}"
+            stop = f"; where it still misses, {short}" if not r.get("refinable", True) else (
+                "; it still misses after the most rounds allowed (--max-refinements)" if self._misses(r) else "")
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
                          f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), "
                          f"{change}{stop}")
@@ -183,7 +189,8 @@ class Report:
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r["degree_before"] != r["degree_after"] else "")
-            stop = "" if r["refinable"] else f"; where it still misses, {short}"
+            stop = f"; where it still misses, {short}" if not r["refinable"] else (
+                "; it still misses after the most rounds allowed (--max-refinements)" if self._misses(r) else "")
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
                          f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
         if self.g1:
