@@ -477,8 +477,8 @@ EDGE_REDUNDANCY = 2
 
 
 def edge_grids(part: Part, classification: Classification, field: DisplacementField,
-               estimator: Callable[[np.ndarray], np.ndarray], edges: list[int] | None = None) -> list[EdgeGrid]:
-    """One :class:`EdgeGrid` per edge of ``part`` (of ``edges``, indices, if given): points
+               estimator: Callable[[np.ndarray], np.ndarray]) -> list[EdgeGrid]:
+    """One :class:`EdgeGrid` per edge of ``part``: points
     ``CHECK_SPACING`` x the part's diagonal apart, at least ``degree + 1`` per knot span, on edges whose own
     nodes are fewer than ``EDGE_REDUNDANCY`` times their poles, kept within ``GRID_REACH`` node spacings of
     the nodes of the edge, its faces and its vertices (the estimate over every node, ``estimator``, is
@@ -486,7 +486,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
     spacing = CHECK_SPACING * part.diagonal
     grids = []
     empty = EdgeGrid(np.zeros(0), np.zeros((0, 3)), np.zeros(0))
-    for edge in part.edges if edges is None else [part.edges[e] for e in edges]:
+    for edge in part.edges:
         own = classification.nodes_of(Role.EDGE, edge.index)
         if edge.degenerate or len(own) >= EDGE_REDUNDANCY * edge.curve.n_poles:
             grids.append(empty)

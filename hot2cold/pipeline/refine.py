@@ -43,7 +43,6 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-
 from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
                             polyline_length, refine_curve, refine_surface)
 from ..core.footpoint import curve_distances, surface_distances
@@ -231,8 +230,8 @@ def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: Displ
         if edges[use.edge].degenerate:
             continue
         uv.append(use.uv)
-        error.append(surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
-                                    face.uv_box))
+        error.append(surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t),
+                                       use.uv, face.uv_box))
     between = np.concatenate(error[1:])
     return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
 
