@@ -138,6 +138,16 @@ def test_console_script_runs_without_traceback(tmp_path, block_step):
     assert not (tmp_path / "c.step").exists()
 
 
+def test_quiet_run_prints_nothing(tmp_path, block_step, block_field):
+    """``-q``: nothing on either stream of a successful run.  Run as a process: the kernel's STEP writer prints
+    its transfer statistics to the process's own standard output, past Python's ``sys.stdout``."""
+    proc = subprocess.run([sys.executable, "-m", "hot2cold", "morph", str(block_step), str(block_field), "-o",
+                           str(tmp_path / "c.step"), "-q"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "" and proc.stderr == ""
+    assert check_solids(read_step(tmp_path / "c.step"))[0].valid
+
+
 def test_inverted_field_gives_the_same_cold_part(tmp_path, block_step, block_nodes, capsys):
     # the cold-to-hot field of an affine hot-to-cold map x -> A x + b is y -> A^-1 (y - b), taken at hot nodes
     # FE output has volume nodes too (the inversion needs them for the displacement's normal derivative):

@@ -77,6 +77,17 @@ def cli_run(assembly, tmp_path_factory):
     return code, out.getvalue(), cold, json.loads(report.read_text())
 
 
+def test_quiet_run_with_names_and_colours_prints_nothing(assembly, tmp_path):
+    """The names-and-colours writer (XCAF) is held quiet as the plain one: ``-q`` prints nothing, in a process
+    of its own (the kernel prints past Python's streams)."""
+    hot, field = assembly
+    proc = subprocess.run([sys.executable, "-m", "hot2cold", "morph", str(hot), str(field), "-o",
+                           str(tmp_path / "rig_cold.step"), "-q"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "" and proc.stderr == ""
+    assert read_step_styles(tmp_path / "rig_cold.step")[1].solids[0].name
+
+
 def _rgb(style):
     return None if style.colour is None else tuple(round(c, 6) for c in style.colour[:3])
 

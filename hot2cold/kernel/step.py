@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import logging
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
 from OCP.IFSelect import IFSelect_RetDone
+from OCP.Message import Message, Message_Gravity
 from OCP.STEPControl import STEPControl_AsIs, STEPControl_Reader, STEPControl_Writer
 from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
 from OCP.TopExp import TopExp_Explorer
@@ -62,9 +64,10 @@ def write_step(shape: TopoDS_Shape, path: str | os.PathLike, verify: bool = Fals
     ``verify``, only once the file reads back as ``shape``'s valid closed solids (:func:`read_back`)."""
     path = check_output_folder(path)
     writer = STEPControl_Writer()
-    if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
-        raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
-    write_translated(writer, path, written=shape if verify else None)
+    with console_quiet():
+        if writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone:
+            raise KernelError(f"the kernel could not translate the cold shape to STEP for {path}")
+        write_translated(writer, path, written=shape if verify else None)
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
@@ -74,6 +77,26 @@ def check_output_folder(path: str | os.PathLike) -> Path:
     if not folder.is_dir():
         raise KernelError(f"output folder does not exist: {folder}")
     return path
+
+
+@contextmanager
+def console_quiet():
+    """Hold the kernel's console printers to warnings while the block runs, then give them their levels back.
+
+    The STEP writer prints a banner of transfer statistics at the "info" level straight to the process's
+    standard output (``Message_PrinterOStream``), past Python's streams: a ``hot2cold morph`` run, even with
+    ``-q``, printed it into its table on stdout.  Warnings and failures still print.  Around the STEP
+    writers' ``Transfer`` and ``Write`` (:func:`write_step`, :func:`hot2cold.kernel.xcaf.write_step_styles`)."""
+    printers = list(Message.DefaultMessenger_s().Printers())
+    levels = [printer.GetTraceLevel() for printer in printers]
+    for printer, level in zip(printers, levels):
+        if level.value < Message_Gravity.Message_Warning.value:
+            printer.SetTraceLevel(Message_Gravity.Message_Warning)
+    try:
+        yield
+    finally:
+        for printer, level in zip(printers, levels):
+            printer.SetTraceLevel(level)
 
 
 def write_translated(writer, path: Path, note: str = "", written: TopoDS_Shape | None = None) -> None:

@@ -43,7 +43,7 @@ from OCP.XCAFDoc import (XCAFDoc_ColorCurv, XCAFDoc_ColorGen, XCAFDoc_ColorSurf,
                          XCAFDoc_DocumentTool, XCAFDoc_ShapeTool)
 
 from ..errors import KernelError, StepReadError
-from .step import check_output_folder, check_step_file, check_step_shape, write_translated
+from .step import check_output_folder, check_step_file, check_step_shape, console_quiet, write_translated
 from .topology import index_map
 
 log = logging.getLogger(__name__)
@@ -494,7 +494,7 @@ def write_step_styles(cold: TopoDS_Shape, styles: Styles, path: str | os.PathLik
     writer.SetNameMode(True)
     writer.SetColorMode(True)
     writer.SetLayerMode(False)
-    with _Statics(write__stepcaf__subshapes__name=1):
+    with _Statics(write__stepcaf__subshapes__name=1), console_quiet():
         try:
             document = cold_document(cold, styles)
             transferred = writer.Transfer(document, STEPControl_AsIs)
