@@ -8,15 +8,16 @@ Run from the repository::
 
 For each size the bundled CalculiX field of the Rotor 37 blade (44 478 surface nodes) is resampled onto an
 FE-like surface node set of that size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`, displacements by
-the local fits of :class:`hot2cold.pipeline.artificial.FieldEstimator`), saved as ``.npz`` under ``--cache`` (default
-``benchmarks/.cache``, made once).  Then, in a fresh process per size so that its peak memory is its own:
+the FE solution's own interpolation over its quadratic boundary triangles, :func:`reference`), saved as
+``.npz`` under ``--cache`` (default ``benchmarks/.cache``, made once).  Then, in a fresh process per size so
+that its peak memory is its own:
 
 * the morph, read from the ``.npz`` (``hot2cold.pipeline.morph``), with the time of each phase: load (STEP and
   field), classify (classification and foot points), fit (edges, faces, G1), rebuild and sew, report, and
   write (the cold STEP); and the process's peak resident memory;
-* the cold part against the exact cold geometry (:func:`exact_error`): dense samples over every face moved by the
-  map the resampled field was made of, the same at every size, so that the accuracy of sizes compares (Δmax at
-  the nodes is a largest over more nodes at each size);
+* the cold part against the exact cold geometry (:func:`exact_error`): dense samples over every face moved by
+  :func:`reference`, the same at every size, so that the accuracy of sizes compares (Δmax at the nodes is a
+  largest over more nodes at each size);
 * the direct approach, for sizes up to ``--direct-max`` (default 100 000; 1 M takes about 15 minutes):
   every node projected with ``GeomAPI_ProjectPointOnSurf`` onto every face (initialised once per face, the
   kernel's default algorithm), its foot point classified with ``BRepTopAdaptor_FClass2d``, the nearest one
@@ -52,12 +53,29 @@ EXACT_SPACING = 0.25
 REFERENCE = (0.5, 36_129)
 
 
+def reference():
+    """The map every resampled field is made of and every cold part is measured against: the bundled field's own
+    CalculiX solution (``benchmarks/fe_fields.py``, case ``rotor37``: the same 44 478 surface nodes and
+    displacements), interpolated by the quadratic triangles of its mesh's boundary
+    (:class:`fe_fields.SurfaceInterpolator`), a callable ``points (m, 3) -> displacements (m, 3)``.  Continuous, as
+    a field must be to be followed between any nodes: the field's local fits
+    (:class:`~hot2cold.pipeline.artificial.FieldEstimator`), used before, change by up to 9e-4 mm between points
+    5 µm apart where their neighbours change.  The solution is solved once (gmsh and ccx, about a minute) and
+    cached by ``fe_fields``."""
+    if str(ROOT / "benchmarks") not in sys.path:          # this folder, when loaded as a module
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    import fe_fields
+
+    solution = fe_fields.solution(fe_fields.case("rotor37"))
+    return fe_fields.SurfaceInterpolator(solution.nodes, solution.triangles, solution.displacements)
+
+
 def resampled(n: int, cache: Path) -> Path:
-    """The Rotor 37 field resampled onto about ``n`` surface nodes, as an ``.npz`` in ``cache``."""
-    path = cache / f"rotor37_{n}.npz"
+    """The Rotor 37 field resampled onto about ``n`` surface nodes (:func:`reference`), as an ``.npz`` in
+    ``cache``."""
+    path = cache / f"rotor37_fe_{n}.npz"
     if path.exists():
         return path
-    from hot2cold.pipeline.artificial import FieldEstimator
     from hot2cold.kernel.sampling import fe_surface_nodes
     from hot2cold.kernel.step import read_step
 
@@ -65,9 +83,7 @@ def resampled(n: int, cache: Path) -> Path:
     start = time.perf_counter()
     spacing = REFERENCE[0] * np.sqrt(REFERENCE[1] / n)
     points, _ = fe_surface_nodes(read_step(STEP), spacing)
-    data = np.load(FIELD)
-    displacements = FieldEstimator(data["points"], data["displacements"])(points)
-    np.savez(path, points=points, displacements=displacements)
+    np.savez(path, points=points, displacements=reference()(points))
     print(f"  resampled {len(points)} nodes (spacing {spacing:.3f} mm) in {time.perf_counter() - start:.0f} s",
           flush=True)
     return path
@@ -123,20 +139,15 @@ def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict
 
 def exact_error(cold: Path) -> tuple[float, float, list[float]]:
     """The cold part ``cold`` (a STEP file) against the exact cold geometry: dense samples
-    :data:`EXACT_SPACING` mm apart inside every face of the hot blade, each moved by the map the resampled fields
-    are made of (the local fits of the bundled field, :func:`resampled`), and their distance to the cold face of
-    the same index (``real_parts.face_errors``).  The same samples and map at every size, so the figures of
-    different sizes compare.  ``(max, mean, per-face max)`` in mm."""
-    from hot2cold.pipeline.artificial import FieldEstimator
+    :data:`EXACT_SPACING` mm apart inside every face of the hot blade, each moved by :func:`reference`, and their
+    distance to the cold face of the same index (``real_parts.face_errors``).  The same samples and map at
+    every size, so the figures of different sizes compare.  ``(max, mean, per-face max)`` in mm."""
     from hot2cold.kernel.step import read_step
 
-    if str(ROOT / "benchmarks") not in sys.path:          # this folder, when loaded as a module
-        sys.path.insert(0, str(ROOT / "benchmarks"))
-    import real_parts
+    import real_parts          # on sys.path since reference()
 
-    data = np.load(FIELD)
-    estimate = FieldEstimator(data["points"], data["displacements"])
-    dists = real_parts.face_errors(read_step(STEP), read_step(cold), lambda p: p + estimate(p), EXACT_SPACING)
+    field = reference()
+    dists = real_parts.face_errors(read_step(STEP), read_step(cold), lambda p: p + field(p), EXACT_SPACING)
     every = np.concatenate(dists)
     return float(every.max()), float(every.mean()), [float(d.max()) for d in dists]
 
