@@ -54,5 +54,8 @@ def tolerance_missed(result) -> str | None:
         return None
     noise = (f" + {report.allowance:.3g} mm for the field's scatter" if report.allowance > 0.1 * report.tolerance
              else "")
-    return (f"tolerance {report.tolerance:g} mm{noise} not met (Δmax {report.delta_max:.3g} mm; the report "
-            f"says where); the cold part is written")
+    misses = report.misses()
+    where, error = misses[0]
+    more = f" and {len(misses) - 1} more" if len(misses) > 1 else ""
+    return (f"tolerance {report.tolerance:g} mm{noise} not met ({where}: {error:.3g} mm{more}; the report says "
+            f"where); the cold part is written")

@@ -113,14 +113,32 @@ class Report:
     edge_refinements: list[dict] = field(default_factory=list)
     g1: list[dict] = field(default_factory=list)
 
+    def misses(self) -> list[tuple[str, float]]:
+        """Where the cold part misses the tolerance plus the field's scatter allowance, worst first: ``(where,
+        error in mm)`` with ``where`` as "face 3 at its nodes" or "face 14 between its nodes".  At the nodes:
+        every face's and edge's Δmax; between them: what the refinement measured there at the end (its grid
+        points near the nodes of faces their nodes do not determine, its edges' gaps), for every face and edge
+        it refined or found missing.  A face with no node of its own (a plane of a triangulation's vertices)
+        misses only between its nodes: NIST Geom's, 2.9 mm off the exact cold geometry after 8 rounds, had
+        been counted as met.  Empty when no tolerance was set."""
+        if self.tolerance is None:
+            return []
+        limit = self.tolerance + self.allowance
+        found = [(f"{kind} {x.index} at its nodes", x.delta_max) for kind, items in (("face", self.faces),
+                                                                                      ("edge", self.edges))
+                 for x in items if not math.isnan(x.delta_max) and x.delta_max > limit]
+        found += [(f"{kind} {r[kind]} between its nodes", r["between_after"])
+                  for kind, records in (("face", self.refinements), ("edge", self.edge_refinements))
+                  for r in records if r.get("between_after", 0.0) > limit]
+        return sorted(found, key=lambda item: -item[1])
+
     @property
     def tolerance_met(self) -> bool | None:
-        """Whether every face's and edge's Δmax is within the tolerance plus the field's scatter allowance
-        (None when no tolerance was set)."""
+        """Whether the cold part is within the tolerance plus the field's scatter allowance at every node and
+        where the refinement measured it between them (:meth:`misses`); None when no tolerance was set."""
         if self.tolerance is None:
             return None
-        worst = [x.delta_max for x in (*self.faces, *self.edges) if not math.isnan(x.delta_max)]
-        return max(worst, default=0.0) <= self.tolerance + self.allowance
+        return not self.misses()
 
     @property
     def nodes_used(self) -> int:
