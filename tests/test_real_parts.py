@@ -166,6 +166,33 @@ def test_rotor67_affine_is_exact_on_the_faces_and_in_the_report(bench, tmp_path)
 
 
 @pytest.mark.slow
+def test_a_gap_of_the_hot_part_is_not_the_morphs(bench, tmp_path):
+    """Handle_SO101 on triangulation nodes under the smooth field: a face with no node of its own (26) sits
+    1.12 mm from one of its hot edges.  The refinement measured the cold gap whole, refined the face six rounds
+    (9x2 to 21x11) without closing it, and the run said the tolerance was missed (exit 5) while the part was
+    5.1e-4 mm from the exact cold geometry.  Only the gap the morph opens counts."""
+    import json
+
+    run = bench.run_here(ROOT / "corpus" / "real_parts" / "Handle_SO101.step", "tess", "smooth", tmp_path)
+    assert (run.exit_code, run.message) == (0, "")
+    assert run.valid and run.exact_max < 1e-3
+    report = json.loads((tmp_path / "Handle_SO101_tess_smooth_report.json").read_text())
+    assert report["faces"][26]["nodes"] == 0 and report["faces"][26]["control_points"] == "9x2"
+    assert 26 not in {r["face"] for r in report["refinements"]}
+
+
+@pytest.mark.slow
+def test_a_plane_without_nodes_still_off_after_the_rounds_is_not_met(bench, tmp_path):
+    """NIST Geom (60 m across) on triangulation nodes 516 mm apart under the smooth field: plane 14 has no
+    node of its own and stays 0.059 mm off the field's estimate after 8 rounds (2.9 mm off the exact cold
+    geometry).  It was counted as met (exit 0); the miss between the nodes now counts: exit 5, named."""
+    run = bench.run_here(ROOT / "corpus" / "real_parts" / "Geom.stp", "tess", "smooth", tmp_path)
+    assert run.exit_code == 5
+    assert run.message.startswith("hot2cold: tolerance 0.001 mm not met (face 14 between its nodes: ")
+    assert run.valid and run.exact_face == 14 and run.exact_max > 1.0
+
+
+@pytest.mark.slow
 def test_vise_on_tessellation_nodes_morphs_under_both_fields(bench, tmp_path):
     """The vise (628 faces) on triangulation nodes: refused as uncovered (a node 5e-10 mm from a vertex whose
     faces both classified its foot point outside); then, under the smooth field, two long bilinear planes
