@@ -46,7 +46,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 STEP = ROOT / "sample_parts" / "rotor37_blade.step"
-FIELD = ROOT / "sample_parts" / "rotor37_blade_field.npz"
 #: Spacing (mm) of the dense samples the cold part is measured at against the exact cold geometry.
 EXACT_SPACING = 0.25
 #: FE-like node spacing (mm) that gives about 36 000 nodes on the Rotor 37 blade; nodes grow as 1/spacing^2.
@@ -144,9 +143,9 @@ def exact_error(cold: Path) -> tuple[float, float, list[float]]:
     every size, so the figures of different sizes compare.  ``(max, mean, per-face max)`` in mm."""
     from hot2cold.kernel.step import read_step
 
+    field = reference()
     import real_parts          # on sys.path since reference()
 
-    field = reference()
     dists = real_parts.face_errors(read_step(STEP), read_step(cold), lambda p: p + field(p), EXACT_SPACING)
     every = np.concatenate(dists)
     return float(every.max()), float(every.mean()), [float(d.max()) for d in dists]
