@@ -13,11 +13,11 @@ fitted again, round after round, until every face's and edge's error is within t
 * The errors (:class:`Targets`): at the nodes, the report's (eq. 21): the distance from each node's cold
   target point to the morphed face or edge, found by Gauss-Newton from the node's own foot point (a local
   distance, never smaller than the report's global one).  Between the nodes, on each face: the distance of
-  the face's cold edges at their pcurves' points beyond the hot edges' own; and on a face whose own nodes do not determine its shape
-  between them (:func:`nodes_determine`: fewer than a patch's polynomial piece needs, on average over its
-  knot-span patches; a narrow band, a small plane with nodes only on its edges, a leading edge of a small
-  radius under a coarse mesh), the field's local estimate at the points of a grid over the face that lie
-  near nodes (where the nodes tell the field).
+  the face's cold edges at their pcurves' points beyond the hot edges' own; and on a face whose own nodes
+  do not determine its shape between them (:func:`nodes_determine`: fewer than a patch's polynomial piece
+  needs, on average over its knot-span patches; a narrow band, a small plane with nodes only on its edges, a
+  leading edge of a small radius under a coarse mesh), the field's local estimate at the points of a grid
+  over the face that lie near nodes (where the nodes tell the field).
 * A knot span holding a point whose error exceeds the limit is halved (knot insertion).  A direction of
   degree below 3 is first raised to cubic (degree elevation): a bilinear plane refined by knots alone can
   only follow a curved field piecewise linearly, with an error that falls as the square of the span.
