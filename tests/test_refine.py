@@ -507,7 +507,7 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
     e = max(range(len(part.edges)), key=lambda e: len(cls.nodes_of(Role.EDGE, e)))
     k = max(range(len(part.faces)), key=lambda k: len(cls.nodes_of(Role.FACE, k)))
     fit, surface = result.edges[e], result.faces[k].surface
-    grid = FaceGrid(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool))
+    grid = FaceGrid(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool), np.zeros(0))
     chord = fit.curve.poles[-1] - fit.curve.poles[0]
     across = np.cross(chord, [1.0, 0.0, 0.0] if abs(chord[0]) < 0.9 * np.linalg.norm(chord) else [0.0, 1.0, 0.0])
     across /= np.linalg.norm(across)                                      # a direction across the edge
@@ -533,3 +533,35 @@ def test_the_report_says_when_the_rounds_ran_out(blade_1mm):
                          for line in lines)
     met = morph(shape, (nodes, _bend(2e-4)(nodes)), Settings(max_refinements=1), check=False)
     assert not any("most rounds allowed" in line for line in met.report.table().splitlines())
+
+
+def test_a_face_out_of_its_nodes_reach_is_named_not_measured(tmp_path, capsys):
+    """A triangulation's vertices lie only on a plane's border: the bundled filleted block's 50 mm cap met the
+    tolerance where its edges' nodes measured it and was 3e-3 mm off the exact cold geometry in its middle,
+    25 mm from any node, with "tolerance met" and nothing else said.  Here a 40 x 40 x 6 mm plate, whose
+    triangulation has vertices at its corners only: every face is named as not measured (the report, its
+    JSON, a warning), the big planes first; FE-like nodes over every face leave nothing unmeasured."""
+    import cadquery as cq
+    from hot2cold.kernel.tessellate import tessellate
+
+    shape = cq.Workplane("XY").box(40.0, 40.0, 6.0).val().wrapped
+    step, out, report = tmp_path / "plate.step", tmp_path / "cold.step", tmp_path / "report.json"
+    write_step(shape, step)
+    bend = _bend(1e-4)
+    nodes = np.unique(np.round(tessellate(shape, 0.05).vertices, 9), axis=0)
+    field = _write_field(tmp_path / "bend.csv", nodes, bend(nodes))
+    code = main(["morph", str(step), str(field), "-o", str(out), "--report", str(report)])
+    err = capsys.readouterr().err
+    data = json.loads(report.read_text())
+    # a box's triangulation has vertices at its corners only: the 40 x 40 planes' middles are 28.3 mm from a
+    # node, the 40 x 6 sides' 20 mm
+    assert sorted(data["unsupported_faces"]) == list(range(6))
+    big = data["unsupported_faces"][:2]
+    assert all(data["faces"][k]["unsupported"] > 0.5 for k in big)
+    assert all(abs(data["faces"][k]["farthest_node"] - 20.0 * np.sqrt(2.0)) < 1.0 for k in big)
+    assert code in (0, 5) and "not measured: face " in err
+
+    fe = fe_surface_nodes(shape, 1.5, seed=1)[0]
+    covered = morph(shape, (fe, bend(fe)))
+    assert covered.report.unsupported_faces() == []
+    assert all(f.unsupported == 0.0 for f in covered.report.faces)

@@ -375,6 +375,8 @@ class FaceGrid:
         pass, as far as the nodes tell.
     near : (m,) bool array, the points near the face's own nodes (:func:`face_grids`), where the nodes tell
         the field on the face.
+    node_distance : (m,) float array, each point's distance (mm) to the nearest node of the face, its edges
+        and its vertices (inf where they have none).
     slack : (m,) float array, how far (mm) the estimate misses the displacements of the nearest
         ``_SLACK_NODES`` nodes at the most (0 where not ``near``): where
         the field has a kink the local fits cannot follow (next to a clamped face) or scatters, the estimate
@@ -386,10 +388,18 @@ class FaceGrid:
     expected: np.ndarray
     slack: np.ndarray
     near: np.ndarray
+    node_distance: np.ndarray
 
     def take(self, keep: np.ndarray) -> FaceGrid:
         """The grid points ``keep`` (a mask or indices) only."""
-        return FaceGrid(self.uv[keep], self.hot[keep], self.expected[keep], self.slack[keep], self.near[keep])
+        return FaceGrid(self.uv[keep], self.hot[keep], self.expected[keep], self.slack[keep], self.near[keep],
+                        self.node_distance[keep])
+
+    @property
+    def unsupported(self) -> float:
+        """The share (0 to 1) of the grid's points not near the nodes: where the face's shape comes from its
+        edges and the field's estimate alone, unmeasured (NaN for an empty grid)."""
+        return float(np.count_nonzero(~self.near) / len(self.near)) if len(self.near) else float("nan")
 
 
 #: A point of a face's grid is near the face's nodes within this many of their node spacings.
@@ -430,6 +440,7 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         uv = face_grid(face, spacing, projector)
         hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
         expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
+        node_distance = np.full(len(uv), np.inf)
         own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
         edges = {use.edge for use in face.uses}
         vertices = {v for e in edges for v in part.edges[e].vertices}
@@ -438,7 +449,8 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                                + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
         reach = GRID_REACH * classification.spacing(nodes)
         if len(uv) and len(nodes) and np.isfinite(reach):
-            near = cKDTree(classification.foot[nodes]).query(hot, distance_upper_bound=reach)[0] < np.inf
+            node_distance = cKDTree(classification.foot[nodes]).query(hot)[0]
+            near = node_distance <= reach
             if near.any() and len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN:
                 own = near
                 local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
@@ -449,7 +461,7 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                 slack[near] = misses[closest].max(axis=1)
         if (~own).any():
             expected[~own] += estimator(hot[~own])
-        grids.append(FaceGrid(uv, hot, expected, slack, near))
+        grids.append(FaceGrid(uv, hot, expected, slack, near, node_distance))
     return grids
 
 

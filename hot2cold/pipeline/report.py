@@ -20,6 +20,7 @@ from ..core.footpoint import curve_distances, project_to_surface
 from ..kernel.validity import SolidCheck
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
+from .checks import GRID_REACH
 
 if TYPE_CHECKING:
     from .morph import MorphContext
@@ -31,7 +32,10 @@ class FaceReport:
 
     ``delta_max`` and ``delta_mean`` are the errors at the face's nodes (eq. 21-22); ``delta_between`` is the
     largest distance of the cold face from the field's local estimate on a grid over its trimmed domain, the
-    error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`)."""
+    error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`).  ``unsupported`` is the
+    share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings from the nodes of the
+    face, its edges and vertices, where nothing measures the face (its shape there comes from its edges and
+    the field's estimate), and ``farthest_node`` the largest such distance (mm); NaN where not checked."""
 
     index: int
     solid: int
@@ -46,6 +50,12 @@ class FaceReport:
     edge_rows: int
     artificial_nodes: int
     delta_between: float = float("nan")
+    unsupported: float = float("nan")
+    farthest_node: float = float("nan")
+
+
+#: A face is named as not told by its nodes when more than this share of its grid lies out of their reach.
+UNSUPPORTED_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -132,6 +142,26 @@ class Report:
                   for r in records if r.get("between_after", 0.0) > limit]
         return sorted(found, key=lambda item: -item[1])
 
+    def unsupported_faces(self) -> list[FaceReport]:
+        """The faces more than :data:`UNSUPPORTED_SHARE` of whose area lies out of their nodes' reach, most
+        first: there the cold face follows its edges and the field's estimate, and neither the tolerance nor
+        anything else measures it.  A plane of a triangulation's vertices has nodes only on its border: the
+        bundled filleted block's 50 mm cap, up to 25 mm from a node, met the tolerance where measured and was
+        3e-3 mm off the exact cold geometry in its middle."""
+        found = [f for f in self.faces if not math.isnan(f.unsupported) and f.unsupported > UNSUPPORTED_SHARE]
+        return sorted(found, key=lambda f: -f.unsupported)
+
+    def unsupported_text(self, most: int = 3) -> str:
+        """One sentence on :meth:`unsupported_faces` (the ``most`` worst named), "" when there are none."""
+        faces = self.unsupported_faces()
+        if not faces:
+            return ""
+        named = ", ".join(f"face {f.index} ({100 * f.unsupported:.0f} %, up to {f.farthest_node:.3g} mm)"
+                          for f in faces[:most])
+        more = f" and {len(faces) - most} more" if len(faces) > most else ""
+        return (f"{named}{more} of the area farther than {GRID_REACH:g} node spacings from any node; the "
+                f"cold face there follows its edges and the field's estimate, unmeasured")
+
     @property
     def tolerance_met(self) -> bool | None:
         """Whether the cold part is within the tolerance plus the field's scatter allowance at every node and
@@ -150,6 +180,7 @@ class Report:
         data["nodes_used"] = self.nodes_used
         data["closed"] = self.free_edges == 0
         data["tolerance_met"] = self.tolerance_met
+        data["unsupported_faces"] = [f.index for f in self.unsupported_faces()]
         return _no_nan(data)
 
     def to_json(self, path) -> None:
@@ -223,6 +254,8 @@ class Report:
             strict = ", knots kept (--keep-knots)" if self.keep_knots else ""
             lines.append(f"tolerance {self.tolerance:.3g} mm{noise}{strict}: "
                          f"{'met' if self.tolerance_met else 'NOT met'}")
+        if self.unsupported_faces():
+            lines.append(f"not measured: {self.unsupported_text()}")
         if self.inversion:
             lines.append(f"field inverted (cold to hot): {self.inversion['iterations']} fixed-point iterations, "
                          f"residual {self.inversion['residual']:.2e} mm")
@@ -301,12 +334,16 @@ class Checks:
     """The kernel's checks of a morph: one :class:`SolidCheck` per solid of the hot part and of the cold one
     (the cold ones marked invalid where :func:`~.checks.check_cold` found a problem), ``gaps (n_edges,)``,
     each edge's largest distance (mm) to the faces it bounds in the cold part, and ``between (n_faces,)``, each
-    face's largest distance (mm) from the field's local estimate between the nodes (None: not checked)."""
+    face's largest distance (mm) from the field's local estimate between the nodes (None: not checked);
+    ``unsupported (n_faces,)`` and ``farthest_node (n_faces,)``, each face's share of its grid out of its
+    nodes' reach and the grid's largest distance (mm) to them (:attr:`FaceReport.unsupported`)."""
 
     hot: list[SolidCheck]
     cold: list[SolidCheck]
     gaps: np.ndarray
     between: np.ndarray | None = None
+    unsupported: np.ndarray | None = None
+    farthest_node: np.ndarray | None = None
 
 
 def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
@@ -326,9 +363,11 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
         d = errors[cls.nodes_of(Role.FACE, fm.index)]
         nu, nv = fm.surface.shape
         between = float("nan") if checks.between is None else float(checks.between[fm.index])
+        unsupported, farthest = ((float("nan"), float("nan")) if checks.unsupported is None else
+                                 (float(checks.unsupported[fm.index]), float(checks.farthest_node[fm.index])))
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
-                                fm.artificial, between))
+                                fm.artificial, between, unsupported, farthest))
     edges = []
     for em in fits.edges:
         d = errors[cls.nodes_of(Role.EDGE, em.index)]
