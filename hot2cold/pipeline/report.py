@@ -156,7 +156,8 @@ class Report:
         faces = self.unsupported_faces()
         if not faces:
             return ""
-        named = ", ".join(f"face {f.index} ({100 * f.unsupported:.0f} %, up to {f.farthest_node:.3g} mm)"
+        named = ", ".join(f"face {f.index} ({100 * f.unsupported:.0f} %, "
+                          + (f"up to {f.farthest_node:.3g} mm)" if math.isfinite(f.farthest_node) else "no node)")
                           for f in faces[:most])
         more = f" and {len(faces) - most} more" if len(faces) > most else ""
         return (f"{named}{more} of the area farther than {GRID_REACH:g} node spacings from any node; the "
