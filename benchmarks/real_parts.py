@@ -26,7 +26,8 @@ the others, and its peak memory is its own):
   of its solids (:func:`hot2cold.kernel.validity.check_solids`) against the hot part's; and the error against
   the exact cold geometry: dense samples inside every hot face (:func:`hot2cold.kernel.sampling.face_samples`,
   half the node spacing), mapped by the analytic field, each one's distance to the cold face with the same
-  index (:class:`hot2cold.kernel.project.Projector`); the largest over all faces and the face where it is.
+  index (:class:`hot2cold.kernel.project.Projector`); the largest over all faces and the face where it is;
+  and the faces the report names as out of their nodes' reach (``unsupported_faces``, "not measured").
 
 A run past ``--timeout`` is killed and recorded as such; a child that dies (signal, memory limit
 ``--max-memory``) is recorded with what it wrote to stderr.  Everything is seeded: the same options give the
@@ -91,6 +92,7 @@ class Run:
     exact_face: int | None = None       # the face of exact_max
     samples: int | None = None
     delta_max: float | None = None      # mm, the report's, at the nodes
+    unmeasured: list[int] | None = None  # the report's unsupported_faces: faces the nodes do not reach
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -307,7 +309,8 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     run.peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     run.message = one_line(stderr.getvalue()).replace(f"{workdir}{os.sep}", "")
     if report_path.exists():
-        run.delta_max = json.loads(report_path.read_text()).get("delta_max")
+        data = json.loads(report_path.read_text())
+        run.delta_max, run.unmeasured = data.get("delta_max"), data.get("unsupported_faces")
     if run.exit_code not in WRITTEN or not cold_path.exists():
         return run
 
@@ -396,10 +399,16 @@ def _num(x, fmt: str) -> str:
     return "-" if x is None else "inf" if x == float("inf") else format(x, fmt)
 
 
+def _faces(faces: list[int], most: int = 4) -> str:
+    """``"6, 9, 8 +11"``: the first ``most`` faces and how many more; "" for none."""
+    more = f" +{len(faces) - most}" if len(faces) > most else ""
+    return ", ".join(str(k) for k in faces[:most]) + more
+
+
 def scoreboard(runs: list[Run], width: int = 90) -> str:
     """The table of ``runs`` and the summary line."""
     head = ("part", "CAD system", "faces", "nodes", "field", "exit", "message", "time s", "peak MB", "valid",
-            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm")
+            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "not measured")
     rows = []
     for r in runs:
         message = r.message.removeprefix("hot2cold: ").removeprefix("error: ")
@@ -409,7 +418,8 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
                      _num(r.exit_code, "d"), message, _num(r.seconds, ".1f"), _num(r.peak_mb, ".0f"),
                      _num(r.valid, ""), _num(r.free_edges, "d"),
                      "-" if r.faces_cold is None else "yes" if r.faces_cold == r.faces else f"{r.faces_cold}",
-                     _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e")))
+                     _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e"),
+                     "-" if r.unmeasured is None else _faces(r.unmeasured)))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     lines.append("")
@@ -419,14 +429,18 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
 
 def summary(runs: list[Run]) -> str:
     """"N of M morph (written, valid on read-back, faces kept, 0 free edges); affine within 1e-8 mm on K of
-    A; smooth within 1e-3 mm on J of S"."""
+    A; smooth within 1e-3 mm on J of S; exit 0 beyond it on a face not named as unmeasured: F (parts)": F
+    counts the silent misses, a success exit for a part off the exact geometry where the report measured it."""
     affine = [r for r in runs if r.field == "affine"]
     smooth = [r for r in runs if r.field == "smooth"]
     met = sum(r.ok and r.exact_max is not None and r.exact_max <= SMOOTH_TOLERANCE for r in smooth)
+    silent = [r.part for r in smooth if r.exit_code == 0 and r.exact_max is not None
+              and r.exact_max > SMOOTH_TOLERANCE and r.exact_face not in (r.unmeasured or [])]
     return (f"{sum(r.ok for r in runs)} of {len(runs)} morph (a cold part written, exit 0 or 5, valid on "
             f"read-back, faces kept, 0 free edges; {sum(r.exit_code == 0 for r in runs)} exit 0); affine within "
             f"{AFFINE_TOLERANCE:g} mm on {sum(r.exact for r in affine)} of {len(affine)}; smooth within "
-            f"{SMOOTH_TOLERANCE:g} mm on {met} of {len(smooth)}")
+            f"{SMOOTH_TOLERANCE:g} mm on {met} of {len(smooth)}; exit 0 beyond it on a face not named as "
+            f"unmeasured: {len(silent)}{' (' + ', '.join(silent) + ')' if silent else ''}")
 
 
 def select(paths: list[Path], names: str | None) -> list[Path]:

@@ -112,12 +112,18 @@ def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
                        free_edges=0, faces_cold=2, exact_max=1e-3)
     missed = bench.Run(part="a", path="a", nodes_kind="fe", field="smooth", faces=2, exit_code=5, valid=True,
                        free_edges=0, faces_cold=2, exact_max=2e-3)
+    silent = bench.Run(part="silent", path="s", nodes_kind="tess", field="smooth", faces=9, exit_code=0, valid=True,
+                       free_edges=0, faces_cold=9, exact_max=3e-3, exact_face=6, unmeasured=[8])
+    named = bench.Run(part="named", path="n", nodes_kind="tess", field="smooth", faces=9, exit_code=0, valid=True,
+                      free_edges=0, faces_cold=9, exact_max=3e-3, exact_face=6, unmeasured=[6, 8])
     assert bench.load(asdict(died)) == died                         # --json, then --show
-    board = bench.scoreboard([good, smooth, missed, died, hung])
-    assert sum(line.startswith("| ") for line in board.splitlines()) == 6       # the head and 5 rows
-    assert board.endswith("3 of 5 morph (a cold part written, exit 0 or 5, valid on read-back, faces kept, "
-                          "0 free edges; 2 exit 0); affine within 1e-08 mm on 1 of 3; smooth within 0.001 mm "
-                          "on 1 of 2")
+    assert bench.load(asdict(named)) == named
+    board = bench.scoreboard([good, smooth, missed, silent, named, died, hung])
+    assert sum(line.startswith("| ") for line in board.splitlines()) == 8       # the head and 7 rows
+    assert "| 6, 8 |" in board
+    assert board.endswith("5 of 7 morph (a cold part written, exit 0 or 5, valid on read-back, faces kept, "
+                          "0 free edges; 4 exit 0); affine within 1e-08 mm on 1 of 3; smooth within 0.001 mm "
+                          "on 1 of 4; exit 0 beyond it on a face not named as unmeasured: 1 (silent)")
 
 
 @pytest.mark.slow
