@@ -401,6 +401,11 @@ class FaceGrid:
         edges and the field's estimate alone, unmeasured (NaN for an empty grid)."""
         return float(np.count_nonzero(~self.near) / len(self.near)) if len(self.near) else float("nan")
 
+    @property
+    def farthest_node(self) -> float:
+        """The largest distance (mm) of a grid point to the nodes (inf without nodes, NaN for an empty grid)."""
+        return float(self.node_distance.max()) if len(self.node_distance) else float("nan")
+
 
 #: A point of a face's grid is near the face's nodes within this many of their node spacings.
 GRID_REACH = 2.0

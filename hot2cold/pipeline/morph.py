@@ -485,9 +485,9 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
                          [f.surface for f in face_morphs], [e.curve for e in edge_morphs])
     stages.lap("report")
-    farthest = np.array([g.node_distance.max() if len(g.node_distance) else np.nan for g in grids])
     report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between,
-                                                np.array([g.unsupported for g in grids]), farthest), errors,
+                                                np.array([g.unsupported for g in grids]),
+                                                np.array([g.farthest_node for g in grids])), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
                           scatter=noise, allowance=allowance)
