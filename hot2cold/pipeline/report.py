@@ -33,8 +33,9 @@ class FaceReport:
     ``delta_max`` and ``delta_mean`` are the errors at the face's nodes (eq. 21-22); ``delta_between`` is the
     largest distance of the cold face from the field's local estimate on a grid over its trimmed domain, the
     error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`).  ``unsupported`` is the
-    share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings from the nodes of the
-    face, its edges and vertices, where nothing measures the face (its shape there comes from its edges and
+    share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings (theirs or all nodes',
+    the larger: ``FaceGrid.support``) from the nodes of the face, its edges and vertices, where nothing
+    measures the face (its shape there comes from its edges and
     the field's estimate), and ``farthest_node`` the largest such distance (mm); NaN where not checked."""
 
     index: int
