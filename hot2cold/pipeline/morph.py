@@ -492,8 +492,8 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
                           scatter=noise, allowance=allowance)
     stages.progress("report")
-    if report.unsupported_faces():
-        log.warning("not measured: %s", report.unsupported_text())
+    if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
+        log.info("not measured: %s", report.unsupported_text())
     result = MorphResult(report=report, part=part, classification=cls, faces=face_morphs, edges=edge_morphs,
                          field=field, node_errors=errors, cold_kernel=cold,
                          problems=tuple(f"cold solid {s} {text}" for s in sorted(problems) for text in problems[s]))
