@@ -539,8 +539,8 @@ def test_a_face_out_of_its_nodes_reach_is_named_not_measured(tmp_path, capsys):
     """A triangulation's vertices lie only on a plane's border: the bundled filleted block's 50 mm cap met the
     tolerance where its edges' nodes measured it and was 3e-3 mm off the exact cold geometry in its middle,
     25 mm from any node, with "tolerance met" and nothing else said.  Here a 40 x 40 x 6 mm plate, whose
-    triangulation has vertices at its corners only: every face is named as not measured (the report's text
-    and JSON), the big planes first; FE-like nodes over every face leave nothing unmeasured."""
+    triangulation has vertices at its corners only: every face is named as not measured (the report's text,
+    JSON and HTML), the big planes first; FE-like nodes over every face leave nothing unmeasured."""
     import cadquery as cq
     from hot2cold.kernel.tessellate import tessellate
 
@@ -560,6 +560,10 @@ def test_a_face_out_of_its_nodes_reach_is_named_not_measured(tmp_path, capsys):
     assert all(data["faces"][k]["unsupported"] > 0.5 for k in big)
     assert all(abs(data["faces"][k]["farthest_node"] - 20.0 * np.sqrt(2.0)) < 1.0 for k in big)
     assert code in (0, 5) and "\nnot measured: face " in printed           # the report's text, as printed
+    from hot2cold.views.page import render_html
+
+    bare = morph(shape, (nodes, bend(nodes)), Settings(tolerance=None))      # and with no tolerance set
+    assert "<p>Not measured: face " in render_html(bare)
 
     fe = fe_surface_nodes(shape, 1.5, seed=1)[0]
     covered = morph(shape, (fe, bend(fe)))

@@ -153,8 +153,8 @@ def _tolerance(report) -> str:
         parts.append(f"<p>Tolerance {report.tolerance:.3g} mm{_widened(report)}: "
                      f"{_flag(bool(report.tolerance_met), 'met', 'NOT met')} "
                      f"(largest Δmax {_mm(report.delta_max)} mm).{strict}</p>")
-        if report.unsupported_faces():
-            parts.append(f"<p>Not measured: {_e(report.unsupported_text(most=10))}.</p>")
+    if report.unsupported_faces():
+        parts.append(f"<p>Not measured: {_e(report.unsupported_text(most=10))}.</p>")
     if report.refinements:
         rows = []
         for r in report.refinements:
