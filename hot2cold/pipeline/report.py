@@ -35,8 +35,8 @@ class FaceReport:
     error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`).  ``unsupported`` is the
     share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings (theirs or all nodes',
     the larger: ``FaceGrid.support``) from the nodes of the face, its edges and vertices, where nothing
-    measures the face (its shape there comes from its edges and
-    the field's estimate), and ``farthest_node`` the largest such distance (mm); NaN where not checked."""
+    measures the face (its shape there comes from its edges and the field's estimate), and
+    ``farthest_node`` the largest such distance (mm); NaN where not checked."""
 
     index: int
     solid: int
