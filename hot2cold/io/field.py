@@ -102,6 +102,11 @@ class DisplacementField:
         (N,) int64 FE node ids if the source had an id column, else ``None``.  Read-only.
     source : str
         Where the field came from (a path, ``"arrays"``), for messages.
+    triangles : numpy.ndarray or None
+        (T, 3) or (T, 6) int64 rows of ``points``: the FE model's boundary triangles (corners, then the
+        midside nodes of the edges 0-1, 1-2, 2-0; :mod:`hot2cold.core.elements`) when the source brings its
+        elements, else ``None``.  The morph samples the field inside them by their own shape functions.
+        Read-only.
 
     The constructor copies the arrays and checks shapes, N >= 1 and finiteness; a violation raises
     :class:`~hot2cold.errors.FieldError`.
@@ -111,6 +116,7 @@ class DisplacementField:
     displacements: np.ndarray
     node_ids: np.ndarray | None = None
     source: str = ""
+    triangles: np.ndarray | None = None
 
     def __post_init__(self):
         where = f" ({self.source})" if self.source else ""
@@ -165,23 +171,50 @@ class DisplacementField:
             ids.flags.writeable = False
         p.flags.writeable = False
         d.flags.writeable = False
+        object.__setattr__(self, "triangles", self._checked_triangles(len(p), where))
         object.__setattr__(self, "points", p)
         object.__setattr__(self, "displacements", d)
         object.__setattr__(self, "node_ids", ids)
         object.__setattr__(self, "source", str(self.source))
 
+    def _checked_triangles(self, n: int, where: str) -> np.ndarray | None:
+        """``self.triangles`` as a read-only ``(T, 3 or 6)`` int64 array of rows below ``n``, or None."""
+        if self.triangles is None:
+            return None
+        try:
+            tri = np.asarray(self.triangles)
+            if tri.dtype.kind not in "iu":
+                raise ValueError(f"dtype {tri.dtype}")
+            tri = np.array(tri, dtype=np.int64, order="C", copy=True)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise FieldError(f"field{where}: triangles must be integer node rows ({_one_line(exc)})") from None
+        if tri.ndim != 2 or tri.shape[1] not in (3, 6):
+            raise FieldError(f"field{where}: triangles must have shape (T, 3) or (T, 6), got shape {tri.shape}; "
+                             f"pass the corner (and midside) node rows of each boundary triangle")
+        if len(tri) == 0:
+            return None
+        if tri.min() < 0 or tri.max() >= n:
+            raise FieldError(f"field{where}: triangles refer to node rows outside 0..{n - 1} "
+                             f"(found {int(tri.min())}..{int(tri.max())})")
+        tri.flags.writeable = False
+        return tri
+
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
     def take(self, rows: np.ndarray) -> DisplacementField:
-        """The field of the nodes ``rows (M,)`` (int, may repeat a node), ids and source kept."""
+        """The field of the nodes ``rows (M,)`` (int, may repeat a node), ids and source kept; the triangles
+        whose nodes are all kept, on the first row of each."""
+        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         ids = None if self.node_ids is None else self.node_ids[rows]
-        return DisplacementField(self.points[rows], self.displacements[rows], ids, self.source)
+        return DisplacementField(self.points[rows], self.displacements[rows], ids, self.source,
+                                 _renumbered(self.triangles, rows, len(self)))
 
     def __repr__(self) -> str:
         dmax = float(np.sqrt((self.displacements ** 2).sum(axis=1)).max())
         ids = "" if self.node_ids is None else ", with node ids"
-        return (f"DisplacementField({_n(len(self), 'node')}, max |d| = {dmax:.6g} mm{ids}, "
+        tri = "" if self.triangles is None else f", {_n(len(self.triangles), 'boundary triangle')}"
+        return (f"DisplacementField({_n(len(self), 'node')}, max |d| = {dmax:.6g} mm{ids}{tri}, "
                 f"source={self.source!r})")
 
     def scaled(self, factor: float) -> DisplacementField:
@@ -192,7 +225,21 @@ class DisplacementField:
             raise FieldError(f"scale factor must be a number, got {factor!r}") from None
         if not (np.isfinite(f) and f > 0):
             raise FieldError(f"scale factor must be a positive finite number, got {factor!r}")
-        return DisplacementField(self.points * f, self.displacements * f, self.node_ids, self.source)
+        return DisplacementField(self.points * f, self.displacements * f, self.node_ids, self.source,
+                                 self.triangles)
+
+
+def _renumbered(triangles: np.ndarray | None, rows: np.ndarray, n: int) -> np.ndarray | None:
+    """``triangles`` (node rows below ``n``) in the numbering of a field made of the nodes ``rows``: those
+    whose nodes are all among ``rows``, each node on the first row that holds it; None when none is left."""
+    if triangles is None:
+        return None
+    new = np.full(n, -1, dtype=np.int64)
+    first = np.unique(rows, return_index=True)
+    new[first[0]] = first[1]
+    mapped = new[triangles]
+    mapped = mapped[(mapped >= 0).all(axis=1)]
+    return mapped if len(mapped) else None
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -343,7 +390,15 @@ def merge_duplicates(field: DisplacementField) -> DisplacementField:
     log.info("field%s: %s at the same position as another with the same displacement merged", where,
              _n(merged, "duplicate node"))
     ids = None if field.node_ids is None else field.node_ids[keep[keep_sorted]]
-    return DisplacementField(p[keep[keep_sorted]], mean[keep_sorted], ids, source=field.source)
+    triangles = None
+    if field.triangles is not None:                              # each node -> its group's row in the result
+        row_of_group = np.empty(len(starts), dtype=np.int64)
+        row_of_group[keep_sorted] = np.arange(len(starts))
+        new = np.empty(n, dtype=np.int64)
+        new[order] = row_of_group[group]
+        triangles = new[field.triangles]
+    return DisplacementField(p[keep[keep_sorted]], mean[keep_sorted], ids, source=field.source,
+                             triangles=triangles)
 
 
 # --------------------------------------------------------------------------------------------------------
