@@ -27,7 +27,9 @@ in ``benchmarks/.cache/`` under the case and a hash of its STEP file and options
 and ccx.  ccx runs with one thread.
 
 Variants (``--variants``, default all), the field given to the morph as an ``.npz`` (``points``,
-``displacements``):
+``displacements`` and the mesh's boundary ``triangles``, as a solver's ``.frd`` brings its elements; the morph
+then also takes the field inside them, :func:`hot2cold.pipeline.load.element_points`, unless
+``--morph-args=--nodes-only``):
 
 * ``surface``: the nodes on the part's faces, as ``hot_to_cold_field(nodes="surface")`` writes them;
 * ``volume``: every node of the mesh, the volume nodes mixed in;
@@ -46,15 +48,15 @@ recorded, not raised):
   each moved by the FE solution's own interpolation, and the distance of (sample + displacement) to the cold
   face with the same index (``real_parts.face_errors``): max and mean per face and overall, and the worst face.
 
-The FE interpolation (:class:`SurfaceInterpolator`): the boundary of the mesh is the 6-node triangles of the
-tetrahedra's faces that no other tetrahedron shares (:func:`boundary_triangles`).  A sample is located on the
-nearest of them (candidates by a KD-tree of triangle centres, each projected by Gauss-Newton on the curved
-quadratic triangle), and its displacement is the quadratic shape functions' blend of the 6 nodal ones.  The
-samples lie on the CAD face, within the mesh's chord error of the FE surface; that distance is reported too
-(``fe_gap``).  Once per case a self-check prints the interpolation's error at the surface nodes (~0), and at
-points halfway between neighbouring nodes of the boundary triangles, both how far a search from the point's
-position lands from the element's own value (~0) and how far the quadratic field bends away from the mean of
-the two nodes (a figure of its smoothness between the nodes).
+The FE interpolation (:class:`hot2cold.core.elements.SurfaceInterpolator`): the boundary of the mesh is the
+6-node triangles of the tetrahedra's faces that no other tetrahedron shares (:func:`boundary_triangles`).  A
+sample is located on the nearest of them (candidates by a KD-tree of triangle centres, each projected by
+Gauss-Newton on the curved quadratic triangle), and its displacement is the quadratic shape functions' blend
+of the 6 nodal ones.  The samples lie on the CAD face, within the mesh's chord error of the FE surface; that
+distance is reported too (``fe_gap``).  Once per case a self-check prints the interpolation's error at the
+surface nodes (~0), and at points halfway between neighbouring nodes of the boundary triangles, both how far a
+search from the point's position lands from the element's own value (~0) and how far the quadratic field bends
+away from the mean of the two nodes (a figure of its smoothness between the nodes).
 
 Measured (2 cores, another benchmark beside it; ``/tmp/febench/baseline.json`` of the commit that added this
 file): every morph exit 0, valid, closed.  Against the FE geometry (max / mean mm): Rotor 37 1.0e-3 / 1.4e-4
@@ -94,6 +96,8 @@ if str(HERE) not in sys.path:
 
 import real_parts  # noqa: E402  (the folder above is on sys.path now)
 
+from hot2cold.core.elements import GMSH_TO_TET10, SurfaceInterpolator, boundary_triangles  # noqa: E402
+
 ROOT = HERE.parent
 SAMPLES = ROOT / "sample_parts"
 CACHE = HERE / ".cache"
@@ -106,159 +110,6 @@ NOISE = 0.003
 SEED = 0
 #: Samples per element length on every face: their spacing is the element size over this.
 SAMPLES_PER_ELEMENT = 3
-#: Corner nodes of the four faces of gmsh's 10-node tetrahedron, and their midside nodes (edges a-b, b-c,
-#: c-a); gmsh's midside nodes 4..9 are on the edges 0-1, 1-2, 2-0, 0-3, 2-3, 1-3.
-TET_FACES = np.array([[0, 1, 2, 4, 5, 6],
-                      [0, 1, 3, 4, 9, 7],
-                      [0, 2, 3, 6, 8, 7],
-                      [1, 2, 3, 5, 8, 9]])
-
-
-# ------------------------------------------------------------------------------------- the quadratic triangle
-
-def shape_functions(st: np.ndarray) -> np.ndarray:
-    """The 6 shape functions ``(m, 6)`` of the quadratic triangle at parameters ``st`` ``(m, 2)``.
-
-    Corners at (0, 0), (1, 0), (0, 1), then the midside nodes of the edges corner 0-1, 1-2, 2-0; with
-    ``L = (1 - s - t, s, t)``: ``L_i (2 L_i - 1)`` at the corners, ``4 L_i L_j`` at the midside nodes.
-    """
-    s, t = st[:, 0], st[:, 1]
-    r = 1.0 - s - t
-    return np.stack([r * (2 * r - 1), s * (2 * s - 1), t * (2 * t - 1), 4 * r * s, 4 * s * t, 4 * t * r], axis=1)
-
-
-def shape_derivatives(st: np.ndarray) -> np.ndarray:
-    """Derivatives ``(m, 6, 2)`` of :func:`shape_functions` by ``s`` and ``t`` at ``st`` ``(m, 2)``."""
-    s, t = st[:, 0], st[:, 1]
-    r = 1.0 - s - t
-    zero = np.zeros_like(s)
-    ds = np.stack([1 - 4 * r, 4 * s - 1, zero, 4 * (r - s), 4 * t, -4 * t], axis=1)
-    dt = np.stack([1 - 4 * r, zero, 4 * t - 1, -4 * s, 4 * s, 4 * (r - t)], axis=1)
-    return np.stack([ds, dt], axis=2)
-
-
-def _clamp(st: np.ndarray) -> np.ndarray:
-    """Parameters ``(m, 2)`` moved into the triangle ``s, t >= 0, s + t <= 1``."""
-    st = np.maximum(st, 0.0)
-    over = st.sum(axis=1) - 1.0
-    st = st - np.where(over > 0, 0.5 * over, 0.0)[:, None]
-    st = np.maximum(st, 0.0)
-    return st / np.maximum(st.sum(axis=1), 1.0)[:, None]
-
-
-def flat_parameters(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """Parameters ``(m, 2)`` of the foot points of ``points`` ``(m, 3)`` on the straight triangles of
-    ``corners`` ``(m, 3, 3)``, moved into the triangle (:func:`_clamp`)."""
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    d = points - corners[:, 0]
-    a11, a12, a22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    b1, b2 = (d * e1).sum(1), (d * e2).sum(1)
-    det = a11 * a22 - a12 * a12
-    det = np.where(det > 0, det, np.inf)
-    return _clamp(np.stack([(a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det], axis=1))
-
-
-def project_to_triangles(points: np.ndarray, xyz: np.ndarray, steps: int = 6) -> tuple[np.ndarray, np.ndarray]:
-    """Foot points of ``points`` ``(m, 3)`` on quadratic triangles with node positions ``xyz`` ``(m, 6, 3)``
-    (one triangle per point): ``(st (m, 2), distance (m,))``.
-
-    Starts from the straight corner triangle (:func:`flat_parameters`), then ``steps`` Gauss-Newton steps on
-    the curved triangle, each kept inside the triangle.
-    """
-    st = flat_parameters(points, xyz[:, :3])
-    for _ in range(steps):
-        n = shape_functions(st)
-        x = np.einsum("mi,mij->mj", n, xyz)
-        jac = np.einsum("mik,mij->mjk", shape_derivatives(st), xyz)            # (m, 3, 2)
-        jtj = np.einsum("mjk,mjl->mkl", jac, jac)
-        jtr = np.einsum("mjk,mj->mk", jac, points - x)
-        det = jtj[:, 0, 0] * jtj[:, 1, 1] - jtj[:, 0, 1] ** 2
-        det = np.where(det > 0, det, np.inf)
-        step = np.stack([jtj[:, 1, 1] * jtr[:, 0] - jtj[:, 0, 1] * jtr[:, 1],
-                         jtj[:, 0, 0] * jtr[:, 1] - jtj[:, 0, 1] * jtr[:, 0]], axis=1) / det[:, None]
-        st = _clamp(st + step)
-    x = np.einsum("mi,mij->mj", shape_functions(st), xyz)
-    return st, np.linalg.norm(points - x, axis=1)
-
-
-def boundary_triangles(tets: np.ndarray) -> np.ndarray:
-    """The 6-node triangles ``(T, 6)`` (node indices: 3 corners, then the midside nodes of the edges corner
-    0-1, 1-2, 2-0) on the boundary of a mesh of 10-node tetrahedra ``(M, 10)`` in gmsh's node order: the
-    faces of the tetrahedra that no other tetrahedron shares."""
-    faces = tets[:, TET_FACES].reshape(-1, 6)
-    key = np.sort(faces[:, :3], axis=1)
-    _, first, count = np.unique(key, axis=0, return_index=True, return_counts=True)
-    return faces[np.sort(first[count == 1])]
-
-
-class SurfaceInterpolator:
-    """A nodal field on the boundary of a mesh of 10-node tetrahedra, interpolated with the quadratic
-    triangles' shape functions at any point near the boundary.
-
-    Parameters
-    ----------
-    nodes : (N, 3) node positions, mm.
-    triangles : (T, 6) boundary triangles (:func:`boundary_triangles`).
-    values : (N, k) nodal values (e.g. displacements, k = 3).
-    candidates : int, triangles tried per point (nearest centres); :data:`WIDER` for the points left farther
-        than :data:`FAR` mm from all of them.
-    """
-
-    #: A point farther than this (mm) from its best candidate is searched again among :data:`WIDER`.
-    FAR = 1e-2
-    WIDER = 64
-    #: Points per batch (memory: about 1 kB per point and candidate).
-    CHUNK = 20_000
-
-    def __init__(self, nodes: np.ndarray, triangles: np.ndarray, values: np.ndarray, candidates: int = 8):
-        from scipy.spatial import cKDTree
-
-        self.nodes = np.asarray(nodes, dtype=np.float64)
-        self.triangles = np.asarray(triangles, dtype=np.int64)
-        self.values = np.asarray(values, dtype=np.float64)
-        self.candidates = min(int(candidates), len(self.triangles))
-        self._tree = cKDTree(self.nodes[self.triangles[:, :3]].mean(axis=1))
-
-    def locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For ``points`` ``(m, 3)``: the triangle ``(m,)`` each one's foot point is on, its parameters
-        ``(m, 2)`` and the distance ``(m,)`` mm."""
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        tri, st, dist = (np.zeros(len(points), dtype=np.int64), np.zeros((len(points), 2)),
-                         np.full(len(points), np.inf))
-        for lo in range(0, len(points), self.CHUNK):
-            part = slice(lo, lo + self.CHUNK)
-            tri[part], st[part], dist[part] = self._best(points[part], self.candidates)
-        far = np.flatnonzero(dist > self.FAR)
-        if len(far) and self.WIDER > self.candidates:
-            t2, s2, d2 = self._best(points[far], min(self.WIDER, len(self.triangles)))
-            better = d2 < dist[far]
-            tri[far[better]], st[far[better]], dist[far[better]] = t2[better], s2[better], d2[better]
-        return tri, st, dist
-
-    def _best(self, points: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The nearest foot point of each of ``points`` ``(m, 3)`` among its ``k`` candidate triangles."""
-        _, cand = self._tree.query(points, k=k)
-        cand = cand.reshape(len(points), k)
-        xyz = self.nodes[self.triangles[cand.ravel()]]                          # (m k, 6, 3)
-        st, dist = project_to_triangles(np.repeat(points, k, axis=0), xyz)
-        best = np.argmin(dist.reshape(-1, k), axis=1)
-        pick = np.arange(len(points)) * k + best
-        return cand.ravel()[pick], st[pick], dist[pick]
-
-    def at(self, tri: np.ndarray, st: np.ndarray) -> np.ndarray:
-        """Values ``(m, k)`` on triangles ``tri`` ``(m,)`` at parameters ``st`` ``(m, 2)``."""
-        return np.einsum("mi,mij->mj", shape_functions(st), self.values[self.triangles[tri]])
-
-    def position(self, tri: np.ndarray, st: np.ndarray) -> np.ndarray:
-        """Positions ``(m, 3)`` on triangles ``tri`` ``(m,)`` at parameters ``st`` ``(m, 2)``."""
-        return np.einsum("mi,mij->mj", shape_functions(st), self.nodes[self.triangles[tri]])
-
-    def __call__(self, points: np.ndarray) -> np.ndarray:
-        """Values ``(m, k)`` at the foot points of ``points`` ``(m, 3)`` on the boundary."""
-        tri, st, _ = self.locate(points)
-        return self.at(tri, st)
-
-
 # ------------------------------------------------------------------------------------------- the FE solutions
 
 @dataclass(frozen=True)
@@ -375,7 +226,7 @@ def solve(c: Case, load, threads: int = 1) -> Solution:
     rows = order[np.searchsorted(full.node_ids, mesh.node_tags, sorter=order)]
     if not np.array_equal(full.node_ids[rows], mesh.node_tags):
         raise RuntimeError(f"{c.name}: the .frd misses nodes of the mesh")
-    return Solution(mesh.nodes, mesh.tets, boundary_triangles(mesh.tets), mesh.boundary_nodes(),
+    return Solution(mesh.nodes, mesh.tets, boundary_triangles(mesh.tets[:, GMSH_TO_TET10]), mesh.boundary_nodes(),
                     np.asarray(full.displacements)[rows], float(size), tuple(faces), t_mesh, t_ccx)
 
 
@@ -398,16 +249,22 @@ def solution(c: Case) -> Solution:
     return sol
 
 
-def variant_field(sol: Solution, variant: str) -> tuple[np.ndarray, np.ndarray]:
-    """The morph's input for ``variant``: node positions ``(n, 3)`` and displacements ``(n, 3)``, mm."""
+def variant_field(sol: Solution, variant: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The morph's input for ``variant``: node positions ``(n, 3)`` and displacements ``(n, 3)``, mm, and the
+    mesh's boundary triangles ``(T, 6)`` as rows of them (the field's elements, as a solver's file brings them)."""
+    from hot2cold.io.field import DisplacementField
+
     if variant == "surface":
-        return sol.nodes[sol.surface], sol.displacements[sol.surface]
-    if variant == "volume":
-        return sol.nodes, sol.displacements
+        rows = sol.surface
+    elif variant in ("volume", "noisy"):
+        rows = np.arange(len(sol.nodes))
+    else:
+        raise ValueError(f"unknown variant {variant!r}: one of {VARIANTS}")
+    displacements = sol.displacements
     if variant == "noisy":
-        noise = np.random.default_rng(SEED).normal(0.0, NOISE, sol.displacements.shape)
-        return sol.nodes, sol.displacements + noise
-    raise ValueError(f"unknown variant {variant!r}: one of {VARIANTS}")
+        displacements = displacements + np.random.default_rng(SEED).normal(0.0, NOISE, displacements.shape)
+    field = DisplacementField(sol.nodes, displacements, triangles=sol.triangles).take(rows)
+    return field.points, field.displacements, field.triangles
 
 
 # --------------------------------------------------------------------------------------------- the self-check
@@ -487,14 +344,15 @@ def load_run(data: dict) -> FERun:
 
 
 def morph(hot: Path, points: np.ndarray, displacements: np.ndarray, stem: str, workdir: Path, run: FERun,
-          morph_args: tuple) -> tuple[Path, dict | None]:
-    """Write the field, morph it by the command line into ``run`` (exit, message, time, memory, Δ); the cold
-    STEP's path and the report (None when none was written)."""
+          morph_args: tuple, triangles: np.ndarray | None = None) -> tuple[Path, dict | None]:
+    """Write the field (with its boundary ``triangles`` when given), morph it by the command line into ``run``
+    (exit, message, time, memory, Δ); the cold STEP's path and the report (None when none was written)."""
     from hot2cold.cli import main as cli_main
 
     field_path, cold, report_path = (workdir / f"{stem}.npz", workdir / f"{stem}_cold.step",
                                      workdir / f"{stem}_report.json")
-    np.savez(field_path, points=points, displacements=displacements)
+    extra = {} if triangles is None else {"triangles": triangles}
+    np.savez(field_path, points=points, displacements=displacements, **extra)
     stderr = io.StringIO()
     start = time.perf_counter()
     with contextlib.redirect_stderr(stderr):
@@ -559,12 +417,12 @@ def run_here(name: str, variant: str, workdir: Path, morph_args: tuple = ()) -> 
                 largest=float(np.linalg.norm(sol.displacements, axis=1).max()))
     hot = read_step(c.step)
     run.faces = len(real_parts.solid_faces(hot))
-    points, displacements = variant_field(sol, variant)
+    points, displacements, triangles = variant_field(sol, variant)
     run.nodes = len(points)
     if variant == "noisy":
         noise = displacements - sol.displacements
         run.noise_std, run.noise_max = float(noise.std()), float(np.abs(noise).max())
-    cold, report = morph(c.step, points, displacements, f"{name}_{variant}", workdir, run, morph_args)
+    cold, report = morph(c.step, points, displacements, f"{name}_{variant}", workdir, run, morph_args, triangles)
     if run.exit_code in real_parts.WRITTEN and cold.exists():       # 5: written, the tolerance missed
         score(hot, cold, sol, run, report)
     return run

@@ -83,6 +83,11 @@ class Settings:
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
         foot points of the other faces, with a warning.
+    element_points : bool
+        When the field brings its FE elements (``DisplacementField.triangles``: a ``.frd``, a VTU with cells, an
+        ``.npz`` with ``triangles``), the morph also takes the field at 4 points inside each boundary triangle,
+        by the triangle's own shape functions (:func:`hot2cold.pipeline.load.element_points`): the solver's
+        field between its nodes.  Off, the morph sees the nodes alone and estimates the field between them.
     max_displacement_rel : float
         The largest displacement of a node on the part accepted, as a share of the part's bounding-box
         diagonal; a field that moves a node farther is refused (FieldError) as no hot-to-cold field.  A
@@ -109,6 +114,7 @@ class Settings:
     g1_angle: float | None = 1.0
     blas_threads: int | None = None
     extrapolate: bool = False
+    element_points: bool = True
     max_displacement_rel: float = 0.1
 
     def __post_init__(self):

@@ -156,6 +156,10 @@ class MorphOptions:
         False, flag="--extrapolate", convert=to_flag,
         help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
         "warning); without it such a field is refused")
+    nodes_only: bool = _option(
+        False, flag="--nodes-only", convert=to_flag,
+        help="use the field's nodes alone, not the FE elements it brings (.frd, VTU cells, an .npz with "
+        "triangles): by default the field is also taken inside the boundary elements by their shape functions")
     max_displacement_rel: float | None = _option(
         None, flag="--max-displacement-rel", convert=to_share, type=float, metavar="SHARE",
         help="largest node displacement accepted, as a share of the part's diagonal (default 0.1): a field "
@@ -198,7 +202,8 @@ class MorphOptions:
             if self.tolerance is not None:
                 given["tolerance"] = self.tolerance
             return Settings(node_distance=self.node_distance, edge_distance=self.edge_distance,
-                            keep_knots=self.keep_knots, extrapolate=self.extrapolate, **given)
+                            keep_knots=self.keep_knots, extrapolate=self.extrapolate,
+                            element_points=not self.nodes_only, **given)
         except ValueError as exc:
             raise InputError(str(exc)) from exc
 

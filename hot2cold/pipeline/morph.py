@@ -42,7 +42,7 @@ from ..kernel.rebuild import ColdKernel, rebuild
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.shapes import to_cadquery
 from ..kernel.step import write_step
-from .load import load_part
+from .load import element_points, load_part
 from ..core.bspline import BSplineCurve, BSplineSurface
 from ..core.footpoint import surface_distances
 from ..core.domain import Trim
@@ -399,7 +399,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
            progress: Progress | None) -> MorphResult:
     """:func:`morph` within its BLAS thread limit, unchecked."""
     stages = _Stages(progress)
-    field = as_field(field, units, field_name)
+    field, element_points_added = element_points(as_field(field, units, field_name), settings)
     inversion = None
     if invert:
         field, inversion = invert_field(field)
@@ -490,7 +490,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
                                                 np.array([g.farthest_node for g in grids])), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
-                          scatter=noise, allowance=allowance)
+                          scatter=noise, allowance=allowance, element_points=element_points_added)
     stages.progress("report")
     if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
         log.info("not measured: %s", report.unsupported_text())

@@ -123,6 +123,7 @@ class Report:
     refinements: list[dict] = field(default_factory=list)
     edge_refinements: list[dict] = field(default_factory=list)
     g1: list[dict] = field(default_factory=list)
+    element_points: int = 0
 
     def misses(self) -> list[tuple[str, float]]:
         """Where the cold part misses the tolerance plus the field's scatter allowance, worst first: ``(where,
@@ -205,7 +206,9 @@ class Report:
         edge_max = max((e.delta_max for e in self.edges if not math.isnan(e.delta_max)), default=float("nan"))
         gap = max((e.gap for e in self.edges), default=0.0)
         lines.append(f"edges: {len(self.edges)}, Δmax {_num(edge_max)} mm, largest edge-face gap {_num(gap)} mm")
-        lines.append(f"nodes: {self.nodes_total} total, {self.nodes_used} used "
+        inside = (f" (of them {self.element_points} points inside the FE elements, by their shape functions)"
+                  if self.element_points else "")
+        lines.append(f"nodes: {self.nodes_total} total{inside}, {self.nodes_used} used "
                      f"({self.nodes_on_faces} face, {self.nodes_on_edges} edge, {self.nodes_on_vertices} vertex), "
                      f"{self.nodes_ignored} ignored (farther than {self.node_distance:.3g} mm from every face)")
         for s in self.solids:
@@ -350,14 +353,16 @@ class Checks:
 
 def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
                  timings: dict[str, float] | None = None, inversion: dict | None = None, scatter: float = 0.0,
-                 allowance: float = 0.0) -> Report:
+                 allowance: float = 0.0, element_points: int = 0) -> Report:
     """Assemble the :class:`Report` of a morph.
 
     ``context`` gives the (refined) part, the classification, the field and the tolerance; ``errors (N,)``
     is each node's distance (mm) to the cold part (eq. 21, :func:`node_errors`); ``inversion`` the field
     inversion's record as a dict (None when the field was not inverted); ``scatter`` the field's scatter
     about a smooth field (mm, :func:`hot2cold.core.localfit.scatter`) and ``allowance`` what it adds to the
-    tolerance at the nodes (mm, :func:`hot2cold.pipeline.refine.noise_allowance`).
+    tolerance at the nodes (mm, :func:`hot2cold.pipeline.refine.noise_allowance`); ``element_points`` how
+    many of the field's points are inside its FE elements rather than nodes
+    (:func:`hot2cold.pipeline.load.element_points`).
     """
     part, cls, field = context.part, context.classification, context.field
     faces = []
@@ -398,4 +403,5 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
         faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
         tolerance=context.settings.tolerance, keep_knots=context.settings.keep_knots, scatter=scatter,
         allowance=allowance, refinements=[asdict(r) for r in fits.refinements],
-        edge_refinements=[asdict(r) for r in fits.edge_refinements], g1=[asdict(r) for r in fits.g1])
+        edge_refinements=[asdict(r) for r in fits.edge_refinements], g1=[asdict(r) for r in fits.g1],
+        element_points=element_points)
