@@ -448,7 +448,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     refinements, edge_refinements = (), ()
     if settings.tolerance is not None and not settings.keep_knots:
         targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids,
-                             edge_grids(context.part, cls, field, context.estimator))
+                             edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
                          context.fit_face, context.refit_edges,
                          lambda part, faces: face_grids(part, projector, cls, field, context.estimator,

@@ -34,7 +34,9 @@ fitted again, round after round, until every face's and edge's error is within t
   edge).  Finer spans would meet the tolerance at the nodes by bending between them, with the artificial
   nodes (local estimates of the field, :mod:`hot2cold.pipeline.artificial`) deciding the shape there.  Spans
   between those lengths get artificial nodes in their empty cells, so every fit stays determined.  A face or
-  edge that misses where no span may be halved is reported as not refinable.
+  edge that misses where no span may be halved is reported as not refinable.  A field sampled inside its FE
+  elements tells the field between its points by the elements' shape functions: there the limit is
+  :data:`MIN_SPAN_SPACINGS_ELEMENTS` spacings.
 """
 from __future__ import annotations
 
@@ -62,6 +64,13 @@ REFINED_DEGREE = 3
 #: A knot span is halved only while each half stays at least this many node spacings long on the part: finer
 #: spans would be decided by the artificial nodes (the field's local estimate) rather than by the nodes.
 MIN_SPAN_SPACINGS = 1.0
+
+#: The same for a field sampled inside its FE elements (:func:`hot2cold.pipeline.load.element_points`): the
+#: elements' shape functions tell the field between the points, and the points' spacing, about a quarter
+#: of an element's edge, is no limit of what is known.  Half of it lets the spans next to a clamped face
+#: follow the steep field there: the bundled mixer's outer wall from 1.07e-3 mm at its points (spans at one
+#: spacing, not refinable further) to 9.8e-4.
+MIN_SPAN_SPACINGS_ELEMENTS = 0.5
 
 
 @dataclass(frozen=True)
@@ -140,7 +149,7 @@ class Targets:
     limit : float, the error accepted: the tolerance plus what the field's scatter allows
         (:func:`noise_allowance`).
     face_spacing : (n_faces,) float array, the node spacing on and around each face (its own nodes and its
-        edges'); :data:`MIN_SPAN_SPACINGS` of it is the shortest half span a refinement makes.
+        edges'); ``min_span_spacings`` of it is the shortest half span a refinement makes.
     edge_spacing : (n_edges,) float array, the same for each edge.
     grids : list of :class:`~hot2cold.pipeline.checks.FaceGrid`, per face whose own nodes do not determine
         it (``between``; a face with nodes only on its edges has none) the grid points near its nodes
@@ -155,6 +164,8 @@ class Targets:
         patches than its nodes fill is not measured against the estimate for that alone.
     edge_grids : list of :class:`~hot2cold.pipeline.checks.EdgeGrid`, per edge the points along it near the
         nodes around it where its own nodes do not outnumber its poles twice, with the field's estimate there.
+    min_span_spacings : float, :data:`MIN_SPAN_SPACINGS`, or :data:`MIN_SPAN_SPACINGS_ELEMENTS` for a field
+        sampled inside its elements.
     """
 
     limit: float
@@ -163,14 +174,16 @@ class Targets:
     grids: list[FaceGrid]
     edge_grids: list[EdgeGrid]
     between: np.ndarray
+    min_span_spacings: float = MIN_SPAN_SPACINGS
 
     @classmethod
     def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid],
-           edge_grids: list[EdgeGrid]) -> Targets:
+           edge_grids: list[EdgeGrid], inside_elements: bool = False) -> Targets:
         """The targets of a classified field: node spacings (:meth:`Classification.spacing` of the nodes of a
         face and its edges, or of an edge; of all nodes where there are none) and the grid points of
         ``grids`` near the nodes of faces their own nodes do not determine, and ``edge_grids`` (one per
-        edge, :func:`~hot2cold.pipeline.checks.edge_grids`)."""
+        edge, :func:`~hot2cold.pipeline.checks.edge_grids`); ``inside_elements``: the field is sampled
+        inside its FE elements (its spans may be shorter, :data:`MIN_SPAN_SPACINGS_ELEMENTS`)."""
         overall = classification.spacing()
 
         def median(nodes: np.ndarray) -> float:
@@ -183,7 +196,8 @@ class Targets:
             + [classification.nodes_of(Role.EDGE, use.edge) for use in f.uses])) for f in part.faces])
         between = np.array([not nodes_determine(f, classification) for f in part.faces], dtype=bool)
         return cls(limit, face_spacing, edge_spacing,
-                   [_measured(g, b) for g, b in zip(grids, between)], list(edge_grids), between)
+                   [_measured(g, b) for g, b in zip(grids, between)], list(edge_grids), between,
+                   MIN_SPAN_SPACINGS_ELEMENTS if inside_elements else MIN_SPAN_SPACINGS)
 
     def with_grids(self, grids: dict[int, FaceGrid]) -> Targets:
         """The same targets with the grids of the faces ``grids`` (index -> the :class:`FaceGrid` of the
@@ -413,21 +427,21 @@ def _spans(breaks: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
 
 
-def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, spacing: float) -> tuple[np.ndarray, bool]:
+def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, shortest: float) -> tuple[np.ndarray, bool]:
     """Where an edge is refined: the midpoints of the knot spans holding a bad node whose halves stay at least
-    ``MIN_SPAN_SPACINGS * spacing`` (mm) long, and whether it is raised to ``REFINED_DEGREE`` (it has a bad
+    ``shortest`` (mm) long, and whether it is raised to ``REFINED_DEGREE`` (it has a bad
     node and a lower degree)."""
     breaks = knot_breaks(curve.knots, curve.degree)
     mids = []
     for r in np.unique(_spans(breaks, t[bad])):
         lo, hi = breaks[r], breaks[r + 1]
         mid = 0.5 * (lo + hi)
-        if polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= MIN_SPAN_SPACINGS * spacing:
+        if polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= shortest:
             mids.append(mid)
     return np.array(mids), bool(bad.any() and curve.degree < REFINED_DEGREE)
 
 
-def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, spacing: float
+def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, shortest: float
                 ) -> list[tuple[np.ndarray, bool]]:
     """Where a face is refined, per direction (u, v): the midpoints of the knot spans of the patches holding
     a bad point, and whether the direction is raised to ``REFINED_DEGREE`` (the face has a bad point and the
@@ -436,7 +450,7 @@ def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, spacin
     A patch is halved along its longer direction on the part, and along the other too where that is at least
     half as long (longest-edge bisection: a patch long along a steep change of the field and short across it,
     next to a clamped face, is cut where the change is, rather than in both directions), and only where the
-    halves stay at least ``MIN_SPAN_SPACINGS * spacing`` (mm) long.  Lengths are measured along the patch's
+    halves stay at least ``shortest`` (mm) long.  Lengths are measured along the patch's
     middle iso-curves."""
     degrees = (surface.u_degree, surface.v_degree)
     breaks = [knot_breaks(surface.u_knots, degrees[0]), knot_breaks(surface.v_knots, degrees[1])]
@@ -450,7 +464,7 @@ def _face_marks(surface: BSplineSurface, uv: np.ndarray, bad: np.ndarray, spacin
             lengths.append(polyline_length(evaluate_surface(surface, *((along, across) if axis == 0
                                                                         else (across, along)))))
         for axis in (0, 1):
-            if lengths[axis] >= 0.5 * max(lengths) and lengths[axis] / 2 >= MIN_SPAN_SPACINGS * spacing:
+            if lengths[axis] >= 0.5 * max(lengths) and lengths[axis] / 2 >= shortest:
                 mids[axis].add(float(ends[axis].mean()))
     return [(np.array(sorted(mids[axis])), bool(bad.any() and degrees[axis] < REFINED_DEGREE)) for axis in (0, 1)]
 
@@ -535,7 +549,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         unplaced_faces, unplaced_edges = set(), set()
         for k in bad_faces:
             err = face_err[k]
-            wanted = _face_marks(part.faces[k].surface, err.uv, err.error > limit, targets.face_spacing[k])
+            wanted = _face_marks(part.faces[k].surface, err.uv, err.error > limit,
+                                 targets.min_span_spacings * targets.face_spacing[k])
             if not any(len(m) or up for m, up in wanted):
                 unplaced_faces.add(k)
             for axis, (mids, up) in enumerate(wanted):
@@ -547,7 +562,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                     elevate.add(root)
         for e in bad_edges:
             t, err = edge_err[e].t, edge_err[e].error
-            mids, up = _edge_marks(part.edges[e].curve, t, err > limit, targets.edge_spacing[e])
+            mids, up = _edge_marks(part.edges[e].curve, t, err > limit,
+                                   targets.min_span_spacings * targets.edge_spacing[e])
             if not len(mids) and not up:
                 unplaced_edges.add(e)
             member = Member.edge(e)
