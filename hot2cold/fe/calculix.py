@@ -347,13 +347,15 @@ def read_hot_to_cold(frd_path, points_from=None) -> DisplacementField:
     (:meth:`hot2cold.fe.frd.FrdFile.hot_to_cold`; ``read_field`` does the same for an ``.frd`` whose
     heading marks it as hot2cold's).  Node positions from ``points_from`` (the :class:`TetMesh` of the run,
     or see :func:`hot2cold.io.field.match_points`), else the ``.frd``'s own 6-digit ones; ``node_ids`` the
-    CalculiX node numbers.
+    CalculiX node numbers; ``triangles`` the boundary triangles of the ``.frd``'s tetrahedra
+    (:attr:`hot2cold.fe.frd.FrdResult.triangles`).
     """
     frd = FrdFile.read(frd_path)
     result = frd.hot_to_cold()
     points = result.points if points_from is None else match_points(points_from, result.node_ids,
                                                                     result.points, frd.path)
-    return DisplacementField(points, result.values, result.node_ids, source=frd.path)
+    return DisplacementField(points, result.values, result.node_ids, source=frd.path,
+                             triangles=result.triangles)
 
 
 # --------------------------------------------------------------------------------------------------------

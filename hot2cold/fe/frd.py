@@ -4,7 +4,13 @@ The ``.frd`` format is fixed-column Fortran output (CalculiX/cgx manual, "Result
 
 * ``    2C`` opens the node block; records ``(1X,'-1',I5,3E12.5)`` (short format, indicator 0) or
   ``(1X,'-1',I10,3E12.5)`` (long format, indicator 1; what ccx writes), then `` -3``.
-* ``    3C`` opens the element block (skipped here), closed by `` -3``.
+* ``    3C`` opens the element block: a header record with the element count in columns 25-36 and the
+  format indicator in 74-75, then per element a record ``(1X,'-1',I5,3I5)`` (short) or
+  ``(1X,'-1',I10,3I5)`` (long: element number, type, group, material) followed by its node numbers in
+  `` -2`` records ``(1X,'-2',15I5)`` or ``(1X,'-2',10I10)`` (as many records as the nodes need), then
+  `` -3``.  Kept: the tetrahedra (type 3, te4 = C3D4; type 6, te10 = C3D10, nodes in the VTK order) and the
+  shell triangles (type 7, tr3; type 8, tr6) as :attr:`FrdFile.elements`; the boundary triangles of the
+  tetrahedra (of the triangles when there are none) become :attr:`FrdResult.triangles`.
 * ``  100C`` opens a nodal result block: a header record with the step number in columns 59-63 and the
   format indicator in 74-75, `` -4  DISP`` (dataset name, number of components), one `` -5`` record per
   component (those flagged "to be calculated", such as DISP's ``ALL``, hold no data), then the values:
@@ -33,7 +39,8 @@ import numpy as np
 
 from ..errors import FieldError
 
-__all__ = ["FrdFile", "FrdResult", "parse_frd", "read_frd", "HOT_TO_COLD_HEADING"]
+__all__ = ["FrdFile", "FrdResult", "parse_frd", "read_frd", "HOT_TO_COLD_HEADING", "ELEMENT_NODES",
+           "ELEMENT_TYPES"]
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +50,16 @@ HOT_TO_COLD_HEADING = "hot2cold hot-to-cold"
 _WIDTH = {0: 5, 1: 10}        # node-number field width by format indicator
 _FIELD = 12                   # E12.5
 _PER_LINE = 6                 # values per record
+
+#: Node count of the ``.frd`` element types (cgx manual, "Element Types"), by type number.
+ELEMENT_NODES = {1: 8, 2: 6, 3: 4, 4: 20, 5: 15, 6: 10, 7: 3, 8: 6, 9: 4, 10: 8, 11: 2, 12: 3}
+
+#: The element types :attr:`FrdFile.elements` keeps, by type number, with their meshio names.
+ELEMENT_TYPES = {3: "tetra", 6: "tetra10", 7: "triangle", 8: "triangle6"}
+
+_TYPE_NAMES = {1: "he8", 2: "pe6", 3: "te4", 4: "he20", 5: "pe15", 6: "te10", 7: "tr3", 8: "tr6", 9: "qu4",
+               10: "qu8", 11: "be2", 12: "be3"}
+_ELEMENT_RECORD = 15          # type, group, material: 3 I5 after the element number
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +77,9 @@ class FrdResult:
     value : float, the header's value (step time, frequency).
     index : int, 0-based position of this block among the file's blocks of the same name.
     count : int, how many blocks of that name the file holds.
+    triangles : numpy.ndarray or None, (T, 3) or (T, 6) int64 rows of ``node_ids``: the boundary triangles
+        of the file's elements (:attr:`FrdFile.elements`; those naming a node without a result dropped),
+        or ``None`` when the file has no tetrahedra or triangles.
     """
 
     node_ids: np.ndarray
@@ -71,11 +91,12 @@ class FrdResult:
     value: float
     index: int
     count: int
+    triangles: np.ndarray | None = None
 
 
 @dataclass
 class _Block:
-    kind: str                 # "nodes" or "results"
+    kind: str                 # "nodes", "elements" or "results"
     start: int                # index of the first data line
     end: int                  # index of the closing " -3" line
     fmt: int
@@ -85,7 +106,7 @@ class _Block:
     components: tuple = ()
     step: int = 0
     value: float = float("nan")
-    numnod: int | None = None
+    numnod: int | None = None  # the header's node (element) count
 
 
 def _int(text: str) -> int | None:
@@ -102,12 +123,16 @@ def _float(text: str) -> float:
         return float("nan")
 
 
-def _format(line: str, lineno: int, path: str, data_line: str | None) -> int:
-    """Format indicator of a block header (columns 74-75); inferred from the first data line if blank."""
+def _format(line: str, lineno: int, path: str, data_line: str | None, elements: bool = False) -> int:
+    """Format indicator of a block header (columns 74-75); inferred from the first data line if blank (its
+    length: the number field, then values of 12 columns, or an element record's 3 fields of 5)."""
     fmt = _int(line[73:75].strip()) if len(line) > 73 else None
     if fmt is None and data_line is not None and data_line.startswith(" -1"):
         rest = len(data_line.rstrip()) - 3
-        fmt = 1 if rest % _FIELD == 10 else 0 if rest % _FIELD == 5 else None
+        if elements:
+            fmt = {_WIDTH[f] + _ELEMENT_RECORD: f for f in _WIDTH}.get(rest)
+        else:
+            fmt = 1 if rest % _FIELD == 10 else 0 if rest % _FIELD == 5 else None
     if fmt in (2, 3):
         raise FieldError(
             f"results file {path} is a binary .frd (format indicator {fmt} on line {lineno + 1}); hot2cold "
@@ -138,9 +163,10 @@ def _block_end(lines: list[str], start: int, keys: tuple[str, ...], path: str, w
         f"the file is truncated (did ccx finish?)")
 
 
-def _scan(lines: list[str], path: str) -> tuple[list[_Block], list[_Block], str]:
-    """Node blocks, result blocks (in file order) and the heading of the file; checks the block structure."""
-    nodes, results = [], []
+def _scan(lines: list[str], path: str) -> tuple[list[_Block], list[_Block], list[_Block], str]:
+    """Node blocks, element blocks, result blocks (in file order) and the heading of the file; checks the
+    block structure."""
+    nodes, elements, results = [], [], []
     heading = None
     n = len(lines)
     i = 0
@@ -154,9 +180,14 @@ def _scan(lines: list[str], path: str) -> tuple[list[_Block], list[_Block], str]
             nodes.append(_Block("nodes", i + 1, end, fmt, i, numnod=_int(line[24:36].strip())))
             i = end + 1
         elif head == "    3C":
-            if _int(line[73:75].strip()) in (2, 3):
-                _format(line, i, path, None)  # raises: binary
-            i = _block_end(lines, i + 1, (" -1", " -2"), path, "element block", i) + 1
+            first = lines[i + 1] if i + 1 < n else None
+            if first is not None and first.startswith(" -3") and _int(line[73:75].strip()) not in (2, 3):
+                fmt = 1  # no element: nothing to read in either format
+            else:
+                fmt = _format(line, i, path, first, elements=True)
+            end = _block_end(lines, i + 1, (" -1", " -2"), path, "element block", i)
+            elements.append(_Block("elements", i + 1, end, fmt, i, numnod=_int(line[24:36].strip())))
+            i = end + 1
         elif head == "  100C":
             i = _result_block(lines, i, path, results)
         elif line.strip() == "9999":
@@ -170,7 +201,7 @@ def _scan(lines: list[str], path: str) -> tuple[list[_Block], list[_Block], str]
         raise FieldError(
             f"results file {path} has no ' 9999' end record after line {n}: the file is truncated "
             f"(did ccx finish?)")
-    return nodes, results, heading or ""
+    return nodes, elements, results, heading or ""
 
 
 def _result_block(lines: list[str], i: int, path: str, results: list[_Block]) -> int:
@@ -265,6 +296,85 @@ def _locate_bad(rows: list[str], index: list[int], s0: int, cols, path: str, wha
     raise FieldError(f"results file {path}: the {what} does not parse")  # pragma: no cover
 
 
+def _parse_elements(lines: list[str], block: _Block, path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The elements of an element block: their types ``(M,)``, the index of each one's first node number
+    ``(M,)`` in the node numbers ``(K,)`` of all of them (in file order), all as int64.  Checks every record:
+    a malformed or cut one, or an element with another number of nodes than its type has, raises FieldError
+    naming its line."""
+    w = _WIDTH[block.fmt]
+    what = f"the element block starting on line {block.header + 1}"
+    body = lines[block.start:block.end]
+    keys = np.array([ln[:3] for ln in body], dtype="U3")
+    heads = np.flatnonzero(keys == " -1")
+    if len(body) and keys[0] != " -1":
+        raise FieldError(
+            f"results file {path} line {block.start + 1}: a ' -2' node record before any ' -1' element record "
+            f"in {what}; the file is malformed")
+    if block.numnod is not None and block.numnod > 0 and block.numnod != len(heads):
+        raise FieldError(
+            f"results file {path}: {what} announces {block.numnod} elements but holds {len(heads)}; the file is "
+            f"malformed or truncated")
+    if not len(body):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    records = [body[k] for k in heads]
+    node_rows = np.flatnonzero(keys == " -2")
+    texts = [body[k][3:].rstrip() for k in node_rows]
+    lengths = np.fromiter(map(len, texts), dtype=np.int64, count=len(texts))
+    try:
+        if min(map(len, records)) < 3 + w + _ELEMENT_RECORD or np.any(lengths % w):
+            raise ValueError("record cut short")
+        types = np.array([r[3 + w:8 + w] for r in records]).astype(np.int64)
+        np.array([r[3:3 + w] for r in records]).astype(np.int64)
+        joined = "".join(texts).encode("latin-1", "replace")
+        numbers = np.frombuffer(joined, dtype=f"S{w}").astype(np.int64) if joined else np.zeros(0, np.int64)
+    except (ValueError, OverflowError):
+        _locate_bad_element(body, block, w, path, what)
+        raise  # not reached: _locate_bad_element raises
+    owner = np.cumsum(keys == " -1")[node_rows] - 1          # the element of each node record
+    counts = np.bincount(owner, weights=lengths // w, minlength=len(heads)).astype(np.int64)
+    expected = np.full(len(types), -1, dtype=np.int64)     # unknown types: any number of nodes
+    for t, k in ELEMENT_NODES.items():
+        expected[types == t] = k
+    bad = np.flatnonzero((expected >= 0) & (counts != expected))
+    if len(bad):
+        k = int(bad[0])
+        t = int(types[k])
+        more = f" ({len(bad)} elements like it)" if len(bad) > 1 else ""
+        raise FieldError(
+            f"results file {path} line {block.start + int(heads[k]) + 1}: element {records[k][3:3 + w].strip()} "
+            f"of {what} has {int(counts[k])} node numbers in its ' -2' records, but its type {t} ({_TYPE_NAMES[t]}) "
+            f"has {int(expected[k])} nodes{more}; the file is truncated or malformed")
+    return types, np.cumsum(counts) - counts, numbers
+
+
+def _locate_bad_element(body: list[str], block: _Block, w: int, path: str, what: str) -> None:
+    """Raise a FieldError naming the first record of an element block that does not parse."""
+    for k, r in enumerate(body):
+        lineno = block.start + k + 1
+        if r.startswith(" -1"):
+            need = 3 + w + _ELEMENT_RECORD
+            if len(r) < need:
+                raise FieldError(
+                    f"results file {path} line {lineno}: the element record in {what} is cut short "
+                    f"({len(r)} columns, needs {need}); the file is truncated or malformed")
+            fields = [(3, 3 + w, "element number"), (3 + w, 8 + w, "element type")]
+        else:
+            text = r[3:].rstrip()
+            if len(text) % w:
+                raise FieldError(
+                    f"results file {path} line {lineno}: the node record in {what} ends inside a field of "
+                    f"{w} columns ({len(r.rstrip())} columns); the file is truncated or malformed")
+            fields = [(a, a + w, "node number") for a in range(3, 3 + len(text), w)]
+        for a, b, name in fields:
+            try:
+                int(r[a:b])
+            except ValueError:
+                raise FieldError(
+                    f"results file {path} line {lineno}, columns {a + 1}-{b}: {r[a:b].strip()!r} is not "
+                    f"{'an' if name.startswith('e') else 'a'} {name} ({what})") from None
+    raise FieldError(f"results file {path}: {what} does not parse")  # pragma: no cover
+
+
 class FrdFile:
     """An ASCII ``.frd`` file, scanned once; :meth:`result` extracts result blocks.
 
@@ -279,8 +389,62 @@ class FrdFile:
         self._lines = text.splitlines()
         if not self._lines or not text.strip():
             raise FieldError(f"results file {path} is empty")
-        self._nodes, self._results, self.heading = _scan(self._lines, path)
+        self._nodes, self._element_blocks, self._results, self.heading = _scan(self._lines, path)
         self._coords: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._elements: dict[int, np.ndarray] | None = None
+        self._boundary: np.ndarray | None = None
+
+    @property
+    def elements(self) -> dict[int, np.ndarray]:
+        """The tetrahedra and triangles of the file's element blocks: ``.frd`` type number (3 te4, 6 te10,
+        7 tr3, 8 tr6; :data:`ELEMENT_TYPES`) -> ``(M, k)`` int64 node numbers, in the file's (CalculiX, VTK)
+        node order; only the types the file has (empty without an element block).  Other types are left out,
+        with an info log line naming them.  Parsed on first use; a malformed element block raises
+        FieldError."""
+        if self._elements is None:
+            kept: dict[int, list[np.ndarray]] = {}
+            skipped: dict[int, int] = {}
+            for block in self._element_blocks:
+                types, first, numbers = _parse_elements(self._lines, block, self.path)
+                for t in np.unique(types).tolist():
+                    sel = types == t
+                    if t not in ELEMENT_TYPES:
+                        skipped[t] = skipped.get(t, 0) + int(sel.sum())
+                        continue
+                    k = ELEMENT_NODES[t]
+                    kept.setdefault(t, []).append(numbers[first[sel][:, None] + np.arange(k)])
+            if skipped:
+                log.info("%s: element type(s) %s not used (hot2cold takes tetrahedra and triangles)", self.path,
+                         ", ".join(f"{t} ({_TYPE_NAMES.get(t, 'unknown')}, {_n_elements(c)})"
+                                   for t, c in sorted(skipped.items())))
+            self._elements = {t: np.concatenate(parts) for t, parts in sorted(kept.items())}
+        return self._elements
+
+    def boundary_triangles(self) -> np.ndarray | None:
+        """The boundary triangles of :attr:`elements` (:func:`hot2cold.io.field.element_triangles`), ``(T, 3)``
+        or ``(T, 6)`` int64 node numbers; None when the file has no tetrahedra or triangles."""
+        if self._boundary is None:
+            from ..io.field import element_triangles
+
+            cells = {ELEMENT_TYPES[t]: conn for t, conn in self.elements.items()}
+            tri = element_triangles(cells, self.path)
+            self._boundary = np.zeros((0, 3), np.int64) if tri is None else tri
+        return self._boundary if len(self._boundary) else None
+
+    def _triangle_rows(self, ids: np.ndarray) -> np.ndarray | None:
+        """:meth:`boundary_triangles` as rows of the node numbers ``ids`` ``(N,)``; those naming a node that is
+        not among them are dropped (info log line); None when none is left."""
+        tri = self.boundary_triangles()
+        if tri is None:
+            return None
+        order = np.argsort(ids, kind="stable")
+        pos = np.minimum(np.searchsorted(ids[order], tri), len(ids) - 1)
+        found = (ids[order][pos] == tri).all(axis=1)
+        if not found.all():
+            log.info("%s: %d of %d boundary triangles name nodes without results; dropped", self.path,
+                     int((~found).sum()), len(tri))
+        rows = order[pos[found]]
+        return rows if len(rows) else None
 
     @classmethod
     def read(cls, path) -> FrdFile:
@@ -314,7 +478,7 @@ class FrdFile:
         if not np.array_equal(first.node_ids, last.node_ids):
             raise FieldError(f"results file {self.path}: its two DISP blocks hold different nodes")
         return FrdResult(last.node_ids, last.points, last.values - first.values, last.name, last.components,
-                         last.step, last.value, last.index, last.count)
+                         last.step, last.value, last.index, last.count, last.triangles)
 
     def datasets(self) -> list[str]:
         """Names of the result blocks, in file order (repeated per step)."""
@@ -375,7 +539,7 @@ class FrdFile:
         log.debug("%s: %s block %d of %d (step %d, value %g), %d nodes", path, block.name, index + 1,
                   len(matching), block.step, block.value, len(ids))
         return FrdResult(ids, sorted_xyz[pos], values, block.name, block.components[:nvals], block.step,
-                         block.value, index, len(matching))
+                         block.value, index, len(matching), self._triangle_rows(ids))
 
     def _node_coords(self, k: int) -> tuple[np.ndarray, np.ndarray, _Block]:
         """Node block ``k``: ids sorted ``(n,)``, their coordinates ``(n, 3)``, the block."""
@@ -392,6 +556,10 @@ class FrdFile:
                                  f"line {block.header + 1}")
             self._coords[k] = (ids, xyz)
         return (*self._coords[k], block)
+
+
+def _n_elements(count: int) -> str:
+    return f"{count} element" + ("" if count == 1 else "s")
 
 
 def parse_frd(text: str, path: str = "<frd>", dataset: str = "DISP", step: int | None = None) -> FrdResult:

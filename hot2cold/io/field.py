@@ -17,23 +17,28 @@ header=...)`` writes it) is used when no plain header line precedes the numbers.
 
 *NumPy* ``.npz`` (recognised by its content, whatever the file name): arrays ``points`` (N, 3) and
 ``displacements`` (N, 3) (or the array named by ``field_name``), optionally ``node_ids`` (N,).  This is what
-:func:`hot2cold.fe.calculix.hot_to_cold_field` writes.
+:func:`hot2cold.fe.calculix.hot_to_cold_field` writes.  An optional array ``triangles`` (T, 3) or (T, 6) of
+integer rows of ``points`` gives the FE model's boundary triangles (:attr:`DisplacementField.triangles`).
 
 *CalculiX results* ``.frd`` (ASCII; recognised by the extension or by its first record ``    1C``): the
 node block and the last ``DISP`` result block (or the block chosen by ``step``, counting ``DISP`` blocks
 from 0; or the dataset named by ``field_name``), read by fixed columns (:mod:`hot2cold.fe.frd`).  The
 ``.frd`` of a hot2cold hot-to-cold deck (:mod:`hot2cold.fe.calculix`, recognised by its heading) gives its
 hot -> cold field: for a rotating part the last ``DISP`` block minus the first.
-``node_ids`` are the CalculiX node numbers.  The ``.frd`` holds coordinates to 6 significant digits only:
-pass ``points_from=`` (the :class:`~hot2cold.fe.mesh.TetMesh` the run was made on, or a field or ``.npz``
-/ text file with node ids, in the same length unit as the ``.frd``) to take the node positions from there,
-matched by node number; positions that disagree with the ``.frd`` beyond its rounding raise an error.
+``node_ids`` are the CalculiX node numbers; the element block's tetrahedra (C3D4, C3D10) give the boundary
+``triangles`` (its shell triangles, tr3 and tr6, when it has no tetrahedra).  The ``.frd`` holds coordinates
+to 6 significant digits only: pass ``points_from=`` (the :class:`~hot2cold.fe.mesh.TetMesh` the run was made
+on, or a field or ``.npz`` / text file with node ids, in the same length unit as the ``.frd``) to take the
+node positions from there, matched by node number; positions that disagree with the ``.frd`` beyond its
+rounding raise an error.
 
 *Mesh files read by meshio* (``.vtu``, ``.vtk``, ``.xdmf``/``.xmf``, ``.msh``, ``.med``, ``.h5m`` and
 meshio's other formats; VTK, VTU and gmsh files are also recognised by content): the mesh points and a
 point field named ``U``, ``displacement``, ``displacements`` or ``DISP`` (any letter case, first match in
-that order), or the one named by ``field_name``; its shape must be (N, 3).  Needs meshio (the ``fe``
-extra).  ``.dat`` files stay text tables.
+that order), or the one named by ``field_name``; its shape must be (N, 3).  Cells of type ``tetra`` or
+``tetra10`` give the boundary ``triangles`` (:func:`element_triangles`); a surface mesh's ``triangle`` or
+``triangle6`` cells are taken as they are; other cell types are not used (an info log line names them).
+Needs meshio (the ``fe`` extra).  ``.dat`` files stay text tables.
 
 Every problem raises :class:`hot2cold.errors.FieldError` with a one-line message that says what is wrong
 and what to do.
@@ -61,7 +66,8 @@ from hot2cold.errors import FieldError
 from .inputs import read_input_bytes
 
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
-           "as_field", "match_points", "merge_duplicates", "DUPLICATE_RTOL", "DUPLICATE_DISPLACEMENT_RTOL"]
+           "as_field", "match_points", "merge_duplicates", "element_triangles", "DUPLICATE_RTOL",
+           "DUPLICATE_DISPLACEMENT_RTOL"]
 
 log = logging.getLogger(__name__)
 
@@ -433,13 +439,14 @@ def _parse_npz(path: str, field_name: str | None = None) -> DisplacementField:
             points = npz["points"]
             displacements = npz[name]
             node_ids = npz["node_ids"] if "node_ids" in keys else None
+            triangles = npz["triangles"] if "triangles" in keys else None
     except FieldError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled objects), OSError, ...
         raise FieldError(
             f"cannot read field file {path} as .npz: {_one_line(exc)}; "
             f"save it with np.savez(path, points=..., displacements=...)") from None
-    return DisplacementField(points, displacements, node_ids, source=path)
+    return DisplacementField(points, displacements, node_ids, source=path, triangles=triangles)
 
 
 #: Extensions read by meshio (besides those meshio itself knows, minus the ones kept as text tables).
@@ -494,7 +501,8 @@ def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from)
     points = result.points
     if points_from is not None:
         points = match_points(points_from, result.node_ids, result.points, path)
-    return DisplacementField(points, result.values[:, :3], result.node_ids, source=path)
+    return DisplacementField(points, result.values[:, :3], result.node_ids, source=path,
+                             triangles=result.triangles)
 
 
 def match_points(source, ids: np.ndarray, rounded: np.ndarray, path: str = "the results") -> np.ndarray:
@@ -581,7 +589,72 @@ def _parse_meshio(path: str, file_format: str | None, field_name: str | None) ->
             f"(x, y, z) vector per point: shape ({len(points)}, 3)")
     if values.dtype.kind not in "iuf":
         raise FieldError(f"mesh file {path}: point field {key!r} holds {values.dtype} values, not numbers")
-    return DisplacementField(points, values, None, source=path)
+    # The field's rows are meshio's points, in its order (none dropped): cells index them as they are.
+    return DisplacementField(points, values, None, source=path, triangles=_mesh_triangles(mesh, path))
+
+
+def _mesh_triangles(mesh, path: str) -> np.ndarray | None:
+    """The boundary triangles of a meshio mesh's cells (rows of its points), see :func:`element_triangles`."""
+    cells: dict[str, list] = {}
+    for block in getattr(mesh, "cells", None) or []:
+        cells.setdefault(str(block.type), []).append(block.data)
+    unused = sorted(k for k in cells if k not in _ELEMENT_NAMES)
+    if unused:
+        log.info("mesh file %s: cells of type %s not used (hot2cold takes tetrahedra and triangles)", path,
+                 ", ".join(f"{k} ({sum(len(np.atleast_1d(np.asarray(a, dtype=object))) for a in cells[k])})"
+                           for k in unused))
+    return element_triangles({k: v for k, v in cells.items() if k in _ELEMENT_NAMES}, path)
+
+
+#: Element types :func:`element_triangles` takes (meshio's names) -> their node count.
+_ELEMENT_NAMES = {"tetra": 4, "tetra10": 10, "triangle": 3, "triangle6": 6}
+
+
+def element_triangles(elements, source: str = "") -> np.ndarray | None:
+    """The boundary triangles of a mesh's elements: ``(T, 3)`` or ``(T, 6)`` int64, in the elements' node
+    labels (rows of the points, or node numbers).
+
+    ``elements`` maps meshio's type names to node arrays (or lists of them) in the VTK node order:
+    ``tetra`` ``(M, 4)``, ``tetra10`` ``(M, 10)``, ``triangle`` ``(T, 3)``, ``triangle6`` ``(T, 6)``; other
+    keys are ignored.  Tetrahedra give their boundary (:func:`hot2cold.core.elements.boundary_triangles`: the
+    faces no second tetrahedron shares), and any triangles beside them are not used; without tetrahedra the
+    triangles (a surface mesh) are taken as they are.  4- and 10-node elements mixed give the linear
+    triangles of all (their corners), logged.  None when there is no tetrahedron or triangle.
+    """
+    from ..core.elements import boundary_triangles
+
+    where = f" {source}" if source else ""
+    arrays: dict[str, np.ndarray] = {}
+    for name, nodes in _ELEMENT_NAMES.items():
+        given = elements.get(name)
+        if given is None:
+            continue
+        blocks = isinstance(given, (list, tuple)) and all(isinstance(a, np.ndarray) and a.ndim == 2 for a in given)
+        parts = list(given) if blocks else [given]
+        try:
+            parts = [np.asarray(a) for a in parts if np.size(a)]
+            for a in parts:
+                if a.dtype.kind not in "iu":
+                    raise ValueError(f"dtype {a.dtype}")
+                if a.ndim != 2 or a.shape[1] != nodes:
+                    raise ValueError(f"shape {a.shape}")
+            conn = np.concatenate([a.astype(np.int64) for a in parts]) if parts else np.zeros((0, nodes), np.int64)
+        except (TypeError, ValueError) as exc:
+            raise FieldError(f"mesh{where}: the {name} elements are not ({nodes}-node) integer node rows "
+                             f"({_one_line(exc)})") from None
+        if len(conn):
+            arrays[name] = conn
+    for solid, linear, quadratic in ((True, "tetra", "tetra10"), (False, "triangle", "triangle6")):
+        if linear in arrays and quadratic in arrays:
+            log.info("mesh%s: %s and %s elements mixed: the boundary is taken with straight (3-node) triangles",
+                     where, linear, quadratic)
+            conn = np.concatenate([arrays[linear], arrays[quadratic][:, :(4 if solid else 3)]])
+        elif linear in arrays or quadratic in arrays:
+            conn = arrays.get(linear, arrays.get(quadratic))
+        else:
+            continue
+        return boundary_triangles(conn) if solid else conn
+    return None
 
 
 def _meshio_read(meshio, path: str, file_format: str | None):
