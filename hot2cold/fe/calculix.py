@@ -391,16 +391,18 @@ def hub_faces(mesh: TetMesh, axis_point=(0.0, 0.0, 0.0), axis_direction=(0.0, 0.
 
 
 def _write_npz(field: DisplacementField, path: Path) -> None:
-    """Write ``points``, ``displacements``, ``node_ids`` compressed under exactly ``path``, whole or not at all
-    (:func:`hot2cold.io.atomic.write_atomically`: a failed write raises OutputError and leaves nothing)."""
+    """Write ``points``, ``displacements``, ``node_ids`` (and ``triangles`` when the field has them)
+    compressed under exactly ``path``, whole or not at all (:func:`hot2cold.io.atomic.write_atomically`: a
+    failed write raises OutputError and leaves nothing)."""
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise FieldError(f"output folder does not exist: {folder}")
 
     def write(tmp: str) -> None:
         with open(tmp, "wb") as fh:             # a file object: savez given a name would add ".npz" to it
+            extra = {} if field.triangles is None else {"triangles": field.triangles}
             np.savez_compressed(fh, points=field.points, displacements=field.displacements,
-                                node_ids=field.node_ids)
+                                node_ids=field.node_ids, **extra)
 
     write_atomically([(path, write)])
 
@@ -486,7 +488,8 @@ def hot_to_cold_field(step_path, out_path=None, *, mesh: MeshOptions = MeshOptio
         The hot part.
     out_path : str or os.PathLike or None
         Where to write the field as a compressed ``.npz`` (``points`` (N, 3) mm, ``displacements``
-        (N, 3) mm, ``node_ids`` (N,) the CalculiX node numbers); ``None`` writes nothing.
+        (N, 3) mm, ``node_ids`` (N,) the CalculiX node numbers, ``triangles`` (T, 6) the mesh's boundary
+        triangles as rows of them); ``None`` writes nothing.
     mesh : MeshOptions
         Element size, smallest size, curvature and degree of the mesh.
     load : LoadCase
@@ -501,7 +504,8 @@ def hot_to_cold_field(step_path, out_path=None, *, mesh: MeshOptions = MeshOptio
     -------
     DisplacementField
         Hot node positions from the mesh (full precision, not the ``.frd``'s 6 digits), displacements
-        hot -> cold from CalculiX, mm; ``node_ids`` the CalculiX node numbers.
+        hot -> cold from CalculiX, mm; ``node_ids`` the CalculiX node numbers; ``triangles`` the mesh's
+        boundary triangles (the morph takes the field inside them too).
     """
     if nodes not in ("surface", "all"):
         raise ValueError(f"nodes must be 'surface' or 'all', got {nodes!r}")
@@ -549,8 +553,10 @@ def hot_to_cold_field(step_path, out_path=None, *, mesh: MeshOptions = MeshOptio
     keep = tets.boundary_nodes() if nodes == "surface" else np.arange(len(tets.nodes))
     order = np.argsort(full.node_ids)
     index = order[np.searchsorted(full.node_ids, tets.node_tags[keep], sorter=order)]
-    field = DisplacementField(full.points[index], full.displacements[index], full.node_ids[index],
-                              source=str(out_path) if out_path is not None else f"FE run on {step_path}")
+    kept = full.take(index)                       # the boundary triangles come along, renumbered
+    field = DisplacementField(kept.points, kept.displacements, kept.node_ids,
+                              source=str(out_path) if out_path is not None else f"FE run on {step_path}",
+                              triangles=kept.triangles)
     log.info("hot-to-cold field of %s: %d of %d nodes (%s), max |d| %.4g mm; mesh %.1f s, ccx %.1f s",
              step_path, len(field), len(tets.nodes), nodes,
              float(np.linalg.norm(field.displacements, axis=1).max()), t_mesh, t_ccx)

@@ -48,7 +48,7 @@ from ..core.footpoint import surface_distances
 from ..core.domain import Trim
 from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
-from .refine import Targets, edge_errors, noise_allowance, refine
+from .refine import TARGET_SHARE, Targets, edge_errors, noise_allowance, refine
 from .report import Checks, Fits, Report, build_report, node_errors
 from ..settings import Settings
 
@@ -447,7 +447,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours)
     refinements, edge_refinements = (), ()
     if settings.tolerance is not None and not settings.keep_knots:
-        targets = Targets.of(context.part, cls, settings.tolerance + allowance, grids,
+        targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, grids,
                              edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
                          context.fit_face, context.refit_edges,

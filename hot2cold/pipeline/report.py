@@ -223,13 +223,16 @@ class Report:
             if r.get("between_before", 0.0) > (self.tolerance or 0.0):
                 change += f", between the nodes {r['between_before']:.2e} -> {r['between_after']:.2e} mm"
             if r["rounds"] == 0:
+                if not self._misses(r):      # above the refinement's aim, within the tolerance: nothing to say
+                    continue
                 why = short if not r.get("refinable", False) else "no refinement round was run"
                 lines.append(f"face {r['face']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r.get("degree_before", "") != r.get("degree_after", "") else "")
-            stop = f"; where it still misses, {short}" if not r.get("refinable", True) else (
-                "; it still misses after the most rounds allowed (--max-refinements)" if self._misses(r) else "")
+            stop = "" if not self._misses(r) else (f"; where it still misses, {short}" if not r.get("refinable", True)
+                                                   else "; it still misses after the most rounds allowed "
+                                                        "(--max-refinements)")
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
                          f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), "
                          f"{change}{stop}")
@@ -238,13 +241,16 @@ class Report:
             if r.get("between_before", 0.0) > (self.tolerance or 0.0):
                 change += f", between the nodes {r['between_before']:.2e} -> {r['between_after']:.2e} mm"
             if r["rounds"] == 0:
+                if not self._misses(r):
+                    continue
                 why = short if not r["refinable"] else "no round was run"
                 lines.append(f"edge {r['edge']} misses the tolerance ({change}) and was not refined: {why}")
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r["degree_before"] != r["degree_after"] else "")
-            stop = f"; where it still misses, {short}" if not r["refinable"] else (
-                "; it still misses after the most rounds allowed (--max-refinements)" if self._misses(r) else "")
+            stop = "" if not self._misses(r) else (f"; where it still misses, {short}" if not r["refinable"]
+                                                   else "; it still misses after the most rounds allowed "
+                                                        "(--max-refinements)")
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
                          f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
         if self.g1:
