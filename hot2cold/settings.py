@@ -87,7 +87,9 @@ class Settings:
         When the field brings its FE elements (``DisplacementField.triangles``: a ``.frd``, a VTU with cells, an
         ``.npz`` with ``triangles``), the morph also takes the field at 4 points inside each boundary triangle,
         by the triangle's own shape functions (:func:`hot2cold.pipeline.load.element_points`): the solver's
-        field between its nodes.  Off, the morph sees the nodes alone and estimates the field between them.
+        field between its nodes.  Not for a field that scatters by more than a tenth of the tolerance (noise,
+        volume nodes; ``hot2cold.pipeline.morph.NOISY_SHARE``): its fits are smoothed instead.  Off, the morph
+        sees the nodes alone and estimates the field between them.
     max_displacement_rel : float
         The largest displacement of a node on the part accepted, as a share of the part's bounding-box
         diagonal; a field that moves a node farther is refused (FieldError) as no hot-to-cold field.  A

@@ -395,11 +395,34 @@ def smoothing_noise(scatter: float, settings: Settings) -> float:
     return scatter
 
 
+#: A field that scatters about a smooth field by more than this share of the tolerance is noisy: it is said
+#: (an info line), and it is not taken inside its FE elements (:func:`~.load.element_points`): the points
+#: would carry its noise, and their rows cost what the smoothed fits cannot use (the bundled mixer's noisy
+#: field of every node ran out of 8 GB with them; the twisted blade's took 20 minutes).
+NOISY_SHARE = 0.1
+
+
+def _classified(part, field: DisplacementField, settings: Settings, projector: Projector
+                ) -> tuple[Classification, DisplacementField, float]:
+    """Classify ``field`` (METHOD step 2) and check it covers the part: the classification, the field as
+    classified (a row per solid a node feeds; displacements carried to the foot points of nodes off the
+    surface) and its scatter about a smooth field (mm, :func:`~hot2cold.core.localfit.scatter`)."""
+    cls = classify_nodes(part, field, settings, projector)
+    if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
+        field = field.take(cls.node)
+    check_coverage(part, cls, field, settings)
+    field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
+                                                          settings.vertex_neighbours, GAP_SHARE * part.diagonal),
+                              field.node_ids, field.source)
+    noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
+    return cls, field, noise
+
+
 def _morph(hot, field, settings: Settings, units: str, field_name: str | None, invert: bool,
            progress: Progress | None) -> MorphResult:
     """:func:`morph` within its BLAS thread limit, unchecked."""
     stages = _Stages(progress)
-    field, element_points_added = element_points(as_field(field, units, field_name), settings)
+    field = as_field(field, units, field_name)
     inversion = None
     if invert:
         field, inversion = invert_field(field)
@@ -414,17 +437,16 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
 
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     projector = Projector(part.kernel.faces, part.kernel.edges)
-    cls = classify_nodes(part, field, settings, projector)
-    if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
-        field = field.take(cls.node)
-    check_coverage(part, cls, field, settings)
-    field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
-                                                          settings.vertex_neighbours, GAP_SHARE * part.diagonal),
-                              field.node_ids, field.source)
+    cls, classified, noise = _classified(part, field, settings, projector)
+    element_points_added = 0
+    if noise <= NOISY_SHARE * (settings.tolerance or np.inf):      # a smooth field: taken inside its elements
+        dense, element_points_added = element_points(field, settings)
+        if element_points_added:
+            cls, classified, noise = _classified(part, dense, settings, projector)
+    field = classified
     scale = FieldScale.of(cls, field)
-    noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
     allowance = noise_allowance(noise, int(cls.used.sum()))
-    if noise > 0.1 * (settings.tolerance or np.inf):
+    if noise > NOISY_SHARE * (settings.tolerance or np.inf):
         log.info("the field scatters by %.3g mm about a smooth field (per component): the fits are smoothed "
                  "and the tolerance at the nodes is widened by %.3g mm", noise, allowance)
     stages.lap("classify")

@@ -85,9 +85,10 @@ class Refinement:
     """What the refinement did to one face (lengths in mm).
 
     ``missed``: the face missed the refinement's limit itself (:data:`TARGET_SHARE` of the tolerance plus the
-    noise allowance; a face may also be refined only because it shares a refined edge); ``delta_max_before``/``delta_max_after``: its largest error at its nodes before and after
-    (Gauss-Newton distances, see the module docstring); ``between_before``/``between_after``: its largest
-    error between the nodes (grid points near nodes against the field's local estimate, and its edges);
+    noise allowance; a face may also be refined only because it shares a refined edge);
+    ``delta_max_before``/``delta_max_after``: its largest error at its nodes before and after (Gauss-Newton
+    distances, see the module docstring); ``between_before``/``between_after``: its largest error between
+    the nodes (grid points near nodes against the field's local estimate, and its edges);
     ``residual``: its largest fit residual ``|S_cold(u_k, v_k) - d_k|`` at the nodes at the end;
     ``refinable`` is False when the face still misses and its knot spans there are already as short as the
     nodes allow (:data:`MIN_SPAN_SPACINGS`).
