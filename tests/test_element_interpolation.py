@@ -1,4 +1,5 @@
-"""The FE interpolation of ``benchmarks/fe_fields.py`` on two hand-made 10-node tetrahedra.
+"""The FE interpolation (:mod:`hot2cold.core.elements`, which ``benchmarks/fe_fields.py`` measures against and
+the morph samples fields inside their elements with) on two hand-made 10-node tetrahedra in gmsh's order.
 
 * the boundary of two tetrahedra sharing a face is their other 6 faces, as 6-node triangles;
 * an affine field is reproduced exactly at arbitrary points of the boundary, curved (a midside node moved off
@@ -11,16 +12,26 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import benchmark_module
+from hot2cold.core import elements
 
 #: gmsh's midside nodes 4..9 of a 10-node tetrahedron are on these edges.
 EDGES = [(0, 1), (1, 2), (2, 0), (0, 3), (2, 3), (1, 3)]
 
 
+class _Gmsh:
+    """:mod:`hot2cold.core.elements` taking tetrahedra in gmsh's node order."""
+
+    shape_functions = staticmethod(elements.shape_functions)
+    SurfaceInterpolator = elements.SurfaceInterpolator
+
+    @staticmethod
+    def boundary_triangles(tets):
+        return elements.boundary_triangles(tets[:, elements.GMSH_TO_TET10])
+
+
 @pytest.fixture(scope="module")
 def bench():
-    with benchmark_module("fe_fields") as module:
-        yield module
+    return _Gmsh()
 
 
 def two_tets(bulge: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
