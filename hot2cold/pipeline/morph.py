@@ -402,15 +402,16 @@ def smoothing_noise(scatter: float, settings: Settings) -> float:
 NOISY_SHARE = 0.1
 
 
-def _classified(part, field: DisplacementField, settings: Settings, projector: Projector
+def _classified(part, field: DisplacementField, settings: Settings, projector: Projector, check: bool = True
                 ) -> tuple[Classification, DisplacementField, float]:
-    """Classify ``field`` (METHOD step 2) and check it covers the part: the classification, the field as
-    classified (a row per solid a node feeds; displacements carried to the foot points of nodes off the
-    surface) and its scatter about a smooth field (mm, :func:`~hot2cold.core.localfit.scatter`)."""
+    """Classify ``field`` (METHOD step 2) and, with ``check``, check it covers the part: the classification,
+    the field as classified (a row per solid a node feeds; displacements carried to the foot points of nodes
+    off the surface) and its scatter about a smooth field (mm, :func:`~hot2cold.core.localfit.scatter`)."""
     cls = classify_nodes(part, field, settings, projector)
     if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
         field = field.take(cls.node)
-    check_coverage(part, cls, field, settings)
+    if check:
+        check_coverage(part, cls, field, settings)
     field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
                                                           settings.vertex_neighbours, GAP_SHARE * part.diagonal),
                               field.node_ids, field.source)
@@ -442,7 +443,8 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     if noise <= NOISY_SHARE * (settings.tolerance or np.inf):      # a smooth field: taken inside its elements
         dense, element_points_added = element_points(field, settings)
         if element_points_added:
-            cls, classified, noise = _classified(part, dense, settings, projector)
+            # its nodes covered the part (checked, warned once); the points inside the elements add to them
+            cls, classified, noise = _classified(part, dense, settings, projector, check=False)
     field = classified
     scale = FieldScale.of(cls, field)
     allowance = noise_allowance(noise, int(cls.used.sum()))
