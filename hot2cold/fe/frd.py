@@ -324,7 +324,7 @@ def _parse_elements(lines: list[str], block: _Block, path: str) -> tuple[np.ndar
         if min(map(len, records)) < 3 + w + _ELEMENT_RECORD or np.any(lengths % w):
             raise ValueError("record cut short")
         types = np.array([r[3 + w:8 + w] for r in records]).astype(np.int64)
-        np.array([r[3:3 + w] for r in records]).astype(np.int64)
+        np.array([r[3:3 + w] for r in records]).astype(np.int64)      # the element numbers parse (not kept)
         joined = "".join(texts).encode("latin-1", "replace")
         numbers = np.frombuffer(joined, dtype=f"S{w}").astype(np.int64) if joined else np.zeros(0, np.int64)
     except (ValueError, OverflowError):

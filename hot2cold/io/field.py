@@ -601,8 +601,7 @@ def _mesh_triangles(mesh, path: str) -> np.ndarray | None:
     unused = sorted(k for k in cells if k not in _ELEMENT_NAMES)
     if unused:
         log.info("mesh file %s: cells of type %s not used (hot2cold takes tetrahedra and triangles)", path,
-                 ", ".join(f"{k} ({sum(len(np.atleast_1d(np.asarray(a, dtype=object))) for a in cells[k])})"
-                           for k in unused))
+                 ", ".join(f"{k} ({sum(len(a) for a in cells[k])})" for k in unused))
     return element_triangles({k: v for k, v in cells.items() if k in _ELEMENT_NAMES}, path)
 
 
