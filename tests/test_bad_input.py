@@ -659,6 +659,33 @@ def test_a_field_the_faces_cannot_follow_is_reported_between_the_nodes(tmp_path,
     assert {r["face"] for r in data["refinements"]} >= {f["index"] for f in data["faces"] if f["nodes"]}
 
 
+def test_face_grids_take_a_field_with_elements_from_its_elements(box):
+    """For a field that brings its FE elements, the grids that measure the faces between the nodes move their
+    points by the elements' own field (:class:`~hot2cold.pipeline.artificial.ElementField`), all of them
+    near the nodes: here a triangulation of the box whose nodal values are the field plus 0.01 mm along x,
+    against the nodes' local estimate of the field alone."""
+    from hot2cold import morph
+    from hot2cold.kernel.project import Projector
+    from hot2cold.kernel.tessellate import tessellate
+    from hot2cold.pipeline.artificial import ElementField, FieldEstimator
+    from hot2cold.pipeline.checks import face_grids
+
+    nodes = box[1]
+    result = morph(str(box[0]), (nodes, FIELD(nodes)))
+    part, cls = result.part, result.classification
+    estimator = FieldEstimator(cls.foot[cls.used], result.field.displacements[cls.used])
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    mesh = tessellate(part.kernel.hot)
+    offset = np.array([0.01, 0.0, 0.0])
+    elements = ElementField(mesh.vertices, mesh.triangles, FIELD(mesh.vertices) + offset, reach=0.01, strain=0.1)
+    plain = face_grids(part, projector, cls, result.field, estimator, 20)
+    taken = face_grids(part, projector, cls, result.field, estimator, 20, elements=elements)
+    for p, t in zip(plain, taken):
+        assert np.abs(p.expected - p.hot - FIELD(p.hot)).max() < 1e-9
+        assert np.abs(t.expected - t.hot - FIELD(t.hot) - offset).max() < 1e-9
+        assert t.near.all() and t.slack.max() < 1e-9
+
+
 def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, capsys, monkeypatch):
     """A face more than twice the field's largest displacement from the field's local estimate somewhere on
     it is refused.  An honest morph of the box does not get there (the check guards against a fit gone

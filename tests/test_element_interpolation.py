@@ -100,3 +100,28 @@ def test_quadratic_field_is_reproduced_on_straight_tetrahedra(bench):
     points = boundary_points(bench, nodes, tri, seed=1)
     assert np.abs(interp(points) - quadratic(points)).max() < 1e-14
     assert np.abs(interp(nodes) - quadratic(nodes)).max() < 1e-15       # every node is on the boundary here
+
+
+def test_element_field_on_and_off_the_boundary():
+    """:class:`hot2cold.pipeline.artificial.ElementField`, the reference of the morph's grids for a field with
+    elements: a point on the boundary takes the elements' value with no slack; one ``g`` mm off it (along the
+    face's normal), within the reach, takes its foot point's value with ``strain * g`` of slack; one beyond the
+    reach is not on the boundary."""
+    from hot2cold.pipeline.artificial import ElementField
+
+    nodes, tets = two_tets()
+    triangles = elements.boundary_triangles(tets[:, elements.GMSH_TO_TET10])
+    values = np.column_stack([nodes[:, 0] ** 2, nodes[:, 1] * nodes[:, 2], nodes[:, 2]])
+    field = ElementField(nodes, triangles, values, reach=0.05, strain=0.01)
+    # the corners A, B, C span a boundary face (the solid lies on the side of D): points on it and beside it
+    a, b, c, d = nodes[:4]
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal)
+    normal *= -np.sign(normal @ (d - a))                   # outwards
+    on_face = a + np.array([[0.2, 0.3], [0.5, 0.1], [0.1, 0.6]]) @ np.array([b - a, c - a])
+    points = np.vstack([on_face, on_face + 0.03 * normal, on_face + 0.2 * normal])
+    on, disp, slack = field(points)
+    assert on.tolist() == [True] * 6 + [False] * 3
+    exact = elements.SurfaceInterpolator(nodes, triangles, values)(on_face)
+    assert np.abs(disp[:3] - exact).max() < 1e-12 and np.abs(disp[3:] - exact).max() < 1e-9
+    assert np.abs(slack - np.r_[0.0, 0.0, 0.0, 3e-4, 3e-4, 3e-4]).max() < 1e-9

@@ -37,6 +37,7 @@ from ..kernel.topology import broken_solid, solid_fault
 from ..settings import Settings
 
 if TYPE_CHECKING:
+    from .artificial import ElementField
     from .morph import MorphResult
 
 log = logging.getLogger(__name__)
@@ -426,7 +427,7 @@ _FACE_ESTIMATE_MIN = 10
 
 def face_grids(part: Part, projector: Projector, classification: Classification, field: DisplacementField,
                estimator: Callable[[np.ndarray], np.ndarray], neighbours: int,
-               faces: list[int] | None = None) -> list[FaceGrid]:
+               faces: list[int] | None = None, elements: ElementField | None = None) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the
     part's diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs
     its own grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined
@@ -441,9 +442,12 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
     segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and
     where its nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the
-    estimate over every node, which has nodes all around, is the better one.  The hot surfaces' parameters
-    stay valid through the refinement to a tolerance (knot insertion and degree elevation keep the
-    surface), so one set of grids serves it and the checks of the cold part."""
+    estimate over every node, which has nodes all around, is the better one.  With ``elements`` (a field
+    that brings its FE elements, :class:`~hot2cold.pipeline.artificial.ElementField`), the points on the FE
+    model's boundary take the elements' own field instead, and all of them are near the nodes: the elements
+    say where the part goes between them (the slack there: their distance off the boundary times the strain).
+    The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
+    elevation keep the surface), so one set of grids serves it and the checks of the cold part."""
     from .artificial import FieldEstimator
 
     spacing = CHECK_SPACING * part.diagonal
@@ -474,6 +478,9 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                 slack[near] = misses[closest].max(axis=1)
         if (~own).any():
             expected[~own] += estimator(hot[~own])
+        if elements is not None and len(uv):
+            on, disp, slack_on = elements(hot)
+            expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
         support = max(reach, overall) if np.isfinite(reach) else overall
         grids.append(FaceGrid(uv, hot, expected, slack, near, node_distance, support))
     return grids

@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .artificial import GAP_SHARE, FieldEstimator, carry_to_feet
+from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
 from .checks import (FaceGrid, FieldScale, check_cold, check_coverage, check_hot, check_result, edge_grids,
                      face_grids)
 from .classify import classify_nodes
@@ -445,7 +445,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
         if element_points_added:
             # its nodes covered the part (checked, warned once); the points inside the elements add to them
             cls, classified, noise = _classified(part, dense, settings, projector, check=False)
-    field = classified
+    fe_field, field = field, classified
     scale = FieldScale.of(cls, field)
     allowance = noise_allowance(noise, int(cls.used.sum()))
     if noise > NOISY_SHARE * (settings.tolerance or np.inf):
@@ -468,7 +468,11 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     # refinement to the tolerance (beyond the paper; not with keep_knots): knots and cubic degree where the
     # error at the nodes or between them misses it; from here on the context's part is the refined hot part
     # (same shape, same parameters), and the refined faces have grids of their own
-    grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours)
+    # the FE model's own field between its nodes, where it brings its elements and they were taken
+    elements = (ElementField(fe_field.points, fe_field.triangles, fe_field.displacements, cls.node_distance,
+                             scale.strain) if element_points_added else None)
+    grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours,
+                       elements=elements)
     refinements, edge_refinements = (), ()
     if settings.tolerance is not None and not settings.keep_knots:
         targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, grids,
@@ -476,7 +480,7 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
                          context.fit_face, context.refit_edges,
                          lambda part, faces: face_grids(part, projector, cls, field, context.estimator,
-                                                        settings.vertex_neighbours, faces))
+                                                        settings.vertex_neighbours, faces, elements))
         context = replace(context, part=refined.part)
         grids = [refined.grids.get(k, grid) for k, grid in enumerate(grids)]
         face_morphs, edge_morphs = refined.faces, refined.edges
