@@ -56,10 +56,11 @@ of the 6 nodal ones.  The samples lie on the CAD face, within the mesh's chord e
 distance is reported too (``fe_gap``).  Samples farther from the FE surface than the morph's ``node_distance``
 lie where the FE model is not the CAD part (the twisted blade's leading edge, where gmsh's straightened
 elements leave its surface 0.2 to 0.6 mm off): the FE value there is the field that far away, no reference;
-they are counted (``fe_off``, with their largest error) and not scored.  Once per case a self-check prints the interpolation's error at the
-surface nodes (~0), and at points halfway between neighbouring nodes of the boundary triangles, both how far a
-search from the point's position lands from the element's own value (~0) and how far the quadratic field bends
-away from the mean of the two nodes (a figure of its smoothness between the nodes).
+they are counted (``fe_off``, with their largest error) and not scored.  Once per case a self-check prints
+the interpolation's error at the surface nodes (~0), and at points halfway between neighbouring nodes of the
+boundary triangles, both how far a search from the point's position lands from the element's own value (~0)
+and how far the quadratic field bends away from the mean of the two nodes (a figure of its smoothness between
+the nodes).
 
 Measured (2 cores, another benchmark beside it; ``/tmp/febench/baseline.json`` of the commit that added this
 file): every morph exit 0, valid, closed.  Against the FE geometry (max / mean mm): Rotor 37 1.0e-3 / 1.4e-4
