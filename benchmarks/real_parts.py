@@ -69,6 +69,11 @@ WRITTEN = (0, 5)
 SEED = 0
 
 
+#: A tangent edge whose angle after the G1 correction is more than this (degrees) above its hot one is counted
+#: (issue 15: every originally tangent edge within 0.01 deg).
+KINK_LIMIT = 0.01
+
+
 @dataclass
 class Run:
     """One (part, node set, field) run: what the morph said and what the cold part is."""
@@ -93,6 +98,10 @@ class Run:
     samples: int | None = None
     delta_max: float | None = None      # mm, the report's, at the nodes
     unmeasured: list[int] | None = None  # the report's unsupported_faces: faces the nodes do not reach
+    kinks: int | None = None            # the report's tangent edges the morph kinked (its g1 list)
+    kink_before: float | None = None    # deg, the largest angle added to a hot one along them before G1
+    kink_max: float | None = None       # deg, the largest angle added to a hot one along them after G1
+    kinks_over: int | None = None       # how many of them are more than KINK_LIMIT off their hot angle
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -311,6 +320,10 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     if report_path.exists():
         data = json.loads(report_path.read_text())
         run.delta_max, run.unmeasured = data.get("delta_max"), data.get("unsupported_faces")
+        added = [g["kink_after_max"] - g["hot_angle_max"] for g in data.get("g1", [])]
+        run.kinks, run.kink_max = len(added), max(added, default=0.0)
+        run.kink_before = max((g["kink_before_max"] - g["hot_angle_max"] for g in data.get("g1", [])), default=0.0)
+        run.kinks_over = sum(a > KINK_LIMIT for a in added)
     if run.exit_code not in WRITTEN or not cold_path.exists():
         return run
 
@@ -408,7 +421,8 @@ def _faces(faces: list[int], most: int = 4) -> str:
 def scoreboard(runs: list[Run], width: int = 90) -> str:
     """The table of ``runs`` and the summary line."""
     head = ("part", "CAD system", "faces", "nodes", "field", "exit", "message", "time s", "peak MB", "valid",
-            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "not measured")
+            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "not measured",
+            "kinked edges", f"> {KINK_LIMIT:g}° after G1", "largest kink added ° before G1", "after")
     rows = []
     for r in runs:
         message = r.message.removeprefix("hot2cold: ").removeprefix("error: ")
@@ -419,7 +433,8 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
                      _num(r.valid, ""), _num(r.free_edges, "d"),
                      "-" if r.faces_cold is None else "yes" if r.faces_cold == r.faces else f"{r.faces_cold}",
                      _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e"),
-                     "-" if r.unmeasured is None else _faces(r.unmeasured)))
+                     "-" if r.unmeasured is None else _faces(r.unmeasured), _num(r.kinks, "d"),
+                     _num(r.kinks_over, "d"), _num(r.kink_before, ".2g"), _num(r.kink_max, ".2g")))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     lines.append("")

@@ -109,8 +109,8 @@ def test_synthetic_kink_removed(weights):
 def test_neither_face_can_turn_so_the_edge_is_only_measured():
     sa, sb = _patches()
     part = _part(sa, sb)
-    # the edge as a pcurve that is not a side of face 1 (a diagonal), and face 0 held all round two poles
-    # deep: reported, not corrected
+    # the edge as a pcurve that is not a side of face 1 (a diagonal), with trimming curves not corrected, and
+    # face 0 held all round two poles deep: reported, not corrected
     use = part.faces[1].uses[0]
     diagonal = EdgeUse(0, use.t, np.column_stack([0.5 * use.t, use.t]))
     thin_a = BSplineSurface(sa.poles[-2:], np.array([0, 0, 1, 1.0]), CUBIC6, 1, 3)
@@ -118,7 +118,7 @@ def test_neither_face_can_turn_so_the_edge_is_only_measured():
              Face(1, sb, part.faces[1].uv_box, (diagonal,), 0)]
     part2 = Part(faces, part.edges, part.vertices, part.solids, part.diagonal, None)
     edges = [TangentEdge(0, (0, 1), (("u1", False), None), 0.0)]
-    surfaces, (rep,) = correct_g1(part2, [thin_a, sb], [ALL_SIDES, ALL_SIDES], edges)
+    surfaces, (rep,) = correct_g1(part2, [thin_a, sb], [ALL_SIDES, ALL_SIDES], edges, trimmed=False)
     assert not rep.corrected
     assert "opposite boundary row" in rep.reason and NOT_ISO_SIDE in rep.reason
     assert rep.kink_after_max == rep.kink_before_max
@@ -392,3 +392,58 @@ def test_two_nearly_parallel_corner_planes_on_one_pole_are_one_condition():
     poles_at, delta = _least_change([(1, n0, 1e-3), (3, n1, 2e-3)])
     assert poles_at == [1, 3]
     np.testing.assert_allclose([delta[0] @ n0, delta[1] @ n1], [1e-3, 2e-3], rtol=0, atol=1e-15)
+
+
+def _greville(knots: np.ndarray, degree: int) -> np.ndarray:
+    return np.array([knots[i + 1:i + degree + 1].mean() for i in range(len(knots) - degree - 1)])
+
+
+def _split_along_diagonal(eps: float) -> tuple[Part, BSplineSurface, BSplineSurface]:
+    """One bicubic surface split along the curve ``u = v`` of its domain into two faces that meet tangentially
+    there (the same surface on both sides: a trimming curve inside both domains, as a blade's sides cut by a
+    plane); the second face's copy lifted by ``eps * (v - u)`` mm along z (the net's Greville abscissae
+    reproduce a linear function exactly), which keeps it on the curve and kinks it there."""
+    surface = _patches()[0]
+    gu, gv = _greville(surface.u_knots, 3), _greville(surface.v_knots, 3)
+    poles = surface.poles.copy()
+    poles[..., 2] += eps * (gv[None, :] - gu[:, None])
+    kinked = surface.with_poles(poles)
+    t = np.linspace(0.0, 1.0, 41)
+    uv = np.column_stack([0.05 + 0.9 * t, 0.05 + 0.9 * t])
+    ends = evaluate_surface(surface, uv[[0, -1], 0], uv[[0, -1], 1])
+    edge = Edge(0, BSplineCurve(ends, np.array([0, 0, 1, 1.0]), 1, None), (0, 1), (0, 1))
+    faces = [Face(k, surface, np.array([0, 1, 0, 1.0]), (EdgeUse(0, t, uv),), 0) for k in (0, 1)]
+    return Part(faces, [edge], ends, [(0, 1)], 6.0, None), surface, kinked
+
+
+def test_trimming_curve_inside_both_domains_is_turned_into_one_plane():
+    """Issue 15: an edge inside both faces' domains (not on a side of either) is corrected by the poles
+    around it (:data:`ALONG_CURVE`): after it the kink is within 0.01 deg at 400 points along the edge, not
+    only where it was solved, and both faces still pass through the edge's points (1e-9 mm)."""
+    from hot2cold.pipeline.g1 import ALONG_CURVE
+
+    part, surface, kinked = _split_along_diagonal(0.02)
+    use = part.faces[0].uses[0]
+    dense = np.linspace(0.05, 0.95, 400)
+    dense = np.column_stack([dense, dense])
+    before = float(np.nanmax(kink_angles(surface, dense, kinked, dense)))
+    assert 0.3 < before < 2.0
+    edges = [TangentEdge(0, (0, 1), (None, None), 0.0)]
+    surfaces, (rep,) = correct_g1(part, [surface, kinked], [(), ()], edges)
+    assert rep.corrected and rep.method == ALONG_CURVE and rep.reason == ""
+    assert rep.kink_before_max == pytest.approx(float(np.nanmax(kink_angles(surface, use.uv, kinked, use.uv))))
+    assert float(np.nanmax(kink_angles(surfaces[0], dense, surfaces[1], dense))) <= 0.01
+    for new, old in zip(surfaces, (surface, kinked)):
+        on_edge = np.abs(evaluate_surface(new, dense[:, 0], dense[:, 1])
+                         - evaluate_surface(old, dense[:, 0], dense[:, 1])).max()
+        assert on_edge < 1e-9
+        assert 0 < np.abs(new.poles - old.poles).max() < 0.02       # both turn, each by less than the lift
+
+
+def test_trimming_curves_left_alone_on_request():
+    """``trimmed=False``: the same edge is only measured, as the paper's correction leaves it."""
+    part, surface, kinked = _split_along_diagonal(0.02)
+    edges = [TangentEdge(0, (0, 1), (None, None), 0.0)]
+    surfaces, (rep,) = correct_g1(part, [surface, kinked], [(), ()], edges, trimmed=False)
+    assert not rep.corrected and rep.reason == NOT_ISO_SIDE and rep.method == ""
+    assert surfaces[0] is surface and surfaces[1] is kinked

@@ -274,7 +274,8 @@ class MorphContext:
         tied = [f.tied_sides for f in face_morphs]
         frozen: dict[int, str] = {}
         for _ in range(_G1_ROUNDS):
-            corrected, reports = correct_g1(part, surfaces, tied, kinked, frozen=frozen)
+            corrected, reports = correct_g1(part, surfaces, tied, kinked, frozen=frozen,
+                                            inside_points=[g.uv for g in grids])
             off = {k: self._moved_off(k, surfaces[k], corrected[k], grids[k]) for k in range(len(surfaces))
                    if corrected[k] is not surfaces[k]}
             off = {k: why for k, why in off.items() if why}
