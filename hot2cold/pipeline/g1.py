@@ -31,20 +31,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, surface_basis, surface_derivative_bases,
+from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, surface_derivative_bases,
                             surface_normals)
 from ..core.lstsq import solve_tsvd
 from ..core.model import EdgeUse, Face, Part, Side, side_along
 
 log = logging.getLogger(__name__)
 
-#: Reason given for an edge that is not a whole side of both faces' surfaces (trimmed faces, split sides),
-#: where the faces' trimming curves are not corrected (``correct_g1(..., trimmed=False)``).
+#: Reason given for an edge that is not a whole side of both faces' surfaces (trimmed faces, split sides), where
+#: the second rows cannot turn the faces (:func:`correct_g1`; the morph turns them in their fits, :func:`turn_rows`).
 NOT_ISO_SIDE = "the edge is not on a side of the surface"
 #: How an edge was corrected: the second rows of poles of faces that have it on a side (eq. 56-75) ...
 SECOND_ROWS = "second rows (eq. 56-75)"
-#: ... or, on a face that has it inside its domain, the poles around the trimming curve (:func:`_solve_along`).
-ALONG_CURVE = "poles along the trimming curve"
+#: ... or the fit of a face that has it inside its domain, its tangents there turned (:func:`turn_rows`).
+ALONG_CURVE = "fit turned along the trimming curve"
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,10 +78,10 @@ class G1Report:
     hot_angle_max : float, largest angle between the normal lines of the hot faces along the edge.
     kink_before_max, kink_after_max : float, the same on the morphed surfaces before and after the
         correction (equal when nothing was corrected; NaN where no normal is defined).
-    corrected : bool, whether poles were moved.
+    corrected : bool, whether the faces were turned.
     reason : str, why not (empty when corrected).
-    method : str, how (empty when not corrected): :data:`SECOND_ROWS` where every face that moved has the edge
-        on a side, :data:`ALONG_CURVE` where one of them has it inside its domain (a trimming curve).
+    method : str, how (empty when not corrected): :data:`SECOND_ROWS` where the faces that turned have the
+        edge on a side, :data:`ALONG_CURVE` where a face has it inside its domain (a trimming curve).
     """
 
     edge: int
@@ -243,12 +243,12 @@ def _share_side_row(part: Part, surfaces: list[BSplineSurface], faces: tuple[Fac
         surfaces[face.index] = surfaces[face.index].with_poles(poles)
 
 
-def _fixed_reason(face: Face, found: tuple[Side, bool] | None, tied: tuple[Side, ...], trimmed: bool = True) -> str:
+def _fixed_reason(face: Face, found: tuple[Side, bool] | None, tied: tuple[Side, ...]) -> str:
     """Why ``face`` cannot turn about an edge that runs along or lies on its side ``found``
-    (``side_along(..., whole=False)``; None when the edge is not on a side, where it turns about the edge's
-    curve when ``trimmed``), or "" when its second row there has poles free to move."""
+    (``side_along(..., whole=False)``; None when the edge is not on a side), or "" when its second row there
+    has poles free to move."""
     if found is None:
-        return "" if trimmed else NOT_ISO_SIDE
+        return NOT_ISO_SIDE
     side = found[0]
     if face.surface.shape[side.axis] < 3:
         return f"the second row of face {face.index} at side {side} is its opposite boundary row"
@@ -276,9 +276,8 @@ class _Task:
     """One face's share of one edge's correction."""
 
     report: int           # index into the reports
-    edge: int
     face: int
-    side: Side | None     # None: the edge lies inside the face's domain (a trimming curve)
+    side: Side
     uv: np.ndarray        # (m, 2) points u_q on this face
     normal_t: np.ndarray  # (m, 3) n_T, eq. (63), NaN rows dropped
     keep: np.ndarray      # (m,) bool, rows where both normals are defined
@@ -286,8 +285,8 @@ class _Task:
 
 def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
                edges: list[TangentEdge] | None = None,
-               n_points_factor: int = 2, frozen: dict[int, str] | None = None, trimmed: bool = True,
-               inside_points: list[np.ndarray] | None = None) -> tuple[list[BSplineSurface], list[G1Report]]:
+               n_points_factor: int = 2, frozen: dict[int, str] | None = None
+               ) -> tuple[list[BSplineSurface], list[G1Report]]:
     """Remove the kinks the morph left along the hot part's tangent edges.
 
     Parameters
@@ -300,11 +299,6 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     n_points_factor : equidistant edge points per pole of a second row (the paper takes about two).
     frozen : faces that must not turn (face index -> why), e.g. because turning would take them off their
         nodes by more than the tolerance; the other face of such an edge turns into their tangent plane.
-    trimmed : whether a face turns about an edge that lies inside its domain (a trimming curve) by the poles
-        around it (:func:`_solve_along`); when not, such an edge is only measured (:data:`NOT_ISO_SIDE`).
-    inside_points : per face, parameters ``(k, 2)`` of points inside its trimmed domain (the check grids),
-        where a face turned about a trimming curve is to change least; None: the change is not measured
-        there, only the poles' displacements are kept small.
 
     Returns
     -------
@@ -313,8 +307,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     there is not its opposite boundary row and has poles that no edge holds.  When both faces can, both turn
     to the common plane (eq. 63); when one can, it turns into the other's tangent plane; when neither can,
     the edge is only measured.  A face's second rows for all its edges are solved at once, so a row that is
-    the second row of two edges (a face three poles deep) serves both in the least-squares sense; then the
-    poles around its edges that lie inside its domain, all at once, the second rows just solved held.
+    the second row of two edges (a face three poles deep) serves both in the least-squares sense.
     """
     if len(face_surfaces) != len(part.faces) or len(tied_sides) != len(part.faces):
         raise ValueError(f"{len(part.faces)} faces but {len(face_surfaces)} surfaces and "
@@ -335,7 +328,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
         # the side row and the second row only, whatever part of the side the edge covers.
         sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
-        why = [(frozen or {}).get(face.index) or _fixed_reason(face, found, tied_sides[face.index], trimmed)
+        why = [(frozen or {}).get(face.index) or _fixed_reason(face, found, tied_sides[face.index])
                for face, found in zip((fa, fb), sides)]
         if all(why):
             reason = why[0] if why[0] == why[1] else "; ".join(why)
@@ -347,10 +340,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
             log.info("G1: edge %d (faces %d, %d): one face moves (%s)", te.edge, *te.faces, why[0] or why[1])
         if None not in sides:
             _share_side_row(part, surfaces, (fa, fb), sides, tied_sides)
-        # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row; a
-        # trimming curve may cross the net diagonally: per pole of both directions.
-        n_row = max(face.surface.shape[1 - found[0].axis] if found else sum(face.surface.shape)
-                    for face, found, fixed in zip((fa, fb), sides, why) if not fixed)
+        # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
+        n_row = max(face.surface.shape[1 - found[0].axis] for face, found in zip((fa, fb), sides) if found)
         m = max(n_points_factor * n_row, 2)
         t = np.linspace(min(use_a.t[0], use_a.t[-1]), max(use_a.t[0], use_a.t[-1]), m)
         uvs = []
@@ -372,29 +363,19 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
             normal_t = na + sign[:, None] * nb                                  # eq. (63)
         for face, uv, found, fixed in zip((fa, fb), uvs, sides, why):
             if not fixed:
-                tasks.append(_Task(r, te.edge, face.index, None if found is None else found[0], uv, normal_t,
-                                   keep))
+                tasks.append(_Task(r, face.index, found[0], uv, normal_t, keep))
 
     for k in sorted({task.face for task in tasks}):
-        mine = [t for t in tasks if t.face == k]
-        on_sides = [t for t in mine if t.side is not None]
-        if on_sides:
-            _solve_face(part.faces[k], surfaces, tied_sides[k], on_sides)
-        in_domain = [t for t in mine if t.side is None]
-        if in_domain:
-            _solve_along(part.faces[k], surfaces, tied_sides[k], in_domain, [t.side for t in on_sides],
-                         None if inside_points is None else inside_points[k])
+        _solve_face(part.faces[k], surfaces, tied_sides[k], [t for t in tasks if t.face == k])
 
-    along = {t.report for t in tasks if t.side is None}
     reports = []
-    for r, (te, (uv_a, uv_b), kb, reason) in enumerate(zip(edges, matched, before, reasons)):
+    for te, (uv_a, uv_b), kb, reason in zip(edges, matched, before, reasons):
         # measured on the final surfaces for every edge: a face's other corrections may touch this one too
         after = _max(kink_angles(surfaces[te.faces[0]], uv_a, surfaces[te.faces[1]], uv_b))
-        method = "" if reason else ALONG_CURVE if r in along else SECOND_ROWS
-        reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason, method))
+        reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason,
+                                "" if reason else SECOND_ROWS))
         if not reason:
-            log.info("G1: edge %d (faces %d, %d): kink %.3g -> %.3g deg (%s)", te.edge, *te.faces, kb, after,
-                     method)
+            log.info("G1: edge %d (faces %d, %d): kink %.3g -> %.3g deg", te.edge, *te.faces, kb, after)
     return surfaces, reports
 
 
@@ -432,113 +413,51 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ..
     surfaces[face.index] = surface.with_poles(poles)
 
 
-#: Weights of the conditions of :func:`_solve_along` against the change of the face inside (all rows in mm):
-#: the face stays on its edges (to rounding), and turns into the common plane as far as it can without bending
-#: more than this many times the angle's share of it inside.  Next to a side held by an edge (a blade's hub
-#: cap, whose row fixes the tangent along it) the face cannot turn without bending: on a blade whose sides
-#: meet along trimming curves, a CalculiX field clamped at the hub, the tangent rows at 1e4 bent the pressure
-#: side 1.25e-2 mm at the hub corner of its trailing edge, at 300 by 1.2e-3, at 30 by 3.3e-4 with the kinks
-#: 0.21 -> 0.0089 deg.
-ALONG_STAY_WEIGHT = 1e4
-ALONG_TURN_WEIGHT = 30.0
-#: A point along a trimming curve is turned only where the free poles make at least this share of its tangent.
-TURNABLE_SHARE = 0.5
-#: Weight of the poles' own displacements in :func:`_solve_along` (mm per mm): it only settles the poles
-#: that neither the conditions nor the face's own points determine (without it they took up to 35 mm on a
-#: refined blade side).
-ALONG_DAMPING = 1e-3
-#: Cut-off factor (eq. 20) of :func:`_solve_along`: its conditions weigh up to ``ALONG_STAY_WEIGHT`` times its
-#: other rows, so the fits' default cut-off (single precision) would cut those.
-ALONG_EPSILON = 1e-12
+#: Weight of the rows of :func:`turn_rows` in a face's fit, against the FE nodes' (1 each; rows in mm).
+TURN_WEIGHT = 10.0
 
 
-def _solve_along(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ...], tasks: list[_Task],
-                 turned: list[Side], inside: np.ndarray | None) -> None:
-    """Turn ``face`` about the edges of ``tasks`` that lie inside its domain (trimming curves: beyond the paper,
-    whose eq. 56-75 need the edge on a side of the surface) into the common tangent planes, changing the face
-    as little as possible at the points ``inside (k, 2)`` of its trimmed domain (its check grid); ``turned``:
-    the sides whose second rows were just solved (:func:`_solve_face`), held.
+def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
+              n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray]:
+    """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that turn its
+    tangents along those of ``edges`` that lie inside its domain into the common planes.
 
-    At the points ``(u_q, v_q)`` of the edges on the face, with ``n`` the unit normal of the common plane
-    (eq. 63), the pole displacements ``dp`` are to meet::
-
-        sum_i R_i(u_q, v_q) dp_i = 0                          (the face stays on the edge)
-        n . sum_i dR_i/du(u_q, v_q) dp_i = -(S_u . n)          (both tangents into the plane: the normal
-        n . sum_i dR_i/dv(u_q, v_q) dp_i = -(S_v . n)           component of eq. 65, per direction)
-
-    and ``sum_i R_i dp_i = 0`` at the face's other edges that are not on a side, so that they stay on it.
-    Only the tangents' normal components are prescribed (the paper's second row takes eq. 65's whole
-    vector, which along a trimming curve conflicts with holding the face on it), so x, y and z are solved
-    together.  They are rows of weights ``ALONG_STAY_WEIGHT`` (positions) and ``ALONG_TURN_WEIGHT`` (tangents)
-    in one least-squares problem (truncated SVD, eq. 19-20) with ``sum_i R_i dp_i = 0`` at the points
-    ``inside`` and ``ALONG_DAMPING dp_i = 0``: the face turns by what its trimmed-away part can take, and
-    bends inside only as far as it must.  The unknowns
-    are the poles whose support meets the tangent edges, less those held (tied sides, sides that are whole
-    edges, the second rows of ``turned``).  The derivative rows are scaled by the mean knot span of their
-    direction, so that every row is a length (mm).
+    At ``n_points_factor * (nu + nv)`` points ``(u_q, v_q)`` along each such edge, with ``n`` the unit normal of
+    the common plane of the two morphed ``surfaces`` there (eq. 63) and ``S_u``, ``S_v`` the face's
+    tangents, the fit is asked for ``S_u - (S_u . n) n`` and ``S_v - (S_v . n) n`` (eq. 64-65, per parameter
+    direction; where the other face is in ``kept``, faces that do not turn, its own tangent plane instead):
+    rows ``weight * h * dR_i/du(u_q, v_q)`` (``h``: the mean knot span, so that the rows are
+    lengths, mm) against the pole displacements from the hot face, the targets less the hot tangents.  In
+    the fit itself, next to the face's nodes, the face turns where its nodes let it.  Returns the rows
+    ``(r, nu * nv)`` and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
     """
-    surface = surfaces[face.index]
-    shape = surface.shape
-    flat = surface.poles.reshape(-1, 3)
-    uv = np.concatenate([t.uv[t.keep] for t in tasks])
-    if not len(uv):
-        return
-    normal = np.concatenate([t.normal_t[t.keep] for t in tasks])
-    normal = normal / np.linalg.norm(normal, axis=1, keepdims=True)
-    at = surface_basis(surface, uv[:, 0], uv[:, 1])
-    du, dv = surface_derivative_bases(surface, uv[:, 0], uv[:, 1])
-    free = np.zeros(shape[0] * shape[1], bool)
-    for basis in (at, du, dv):
-        free[basis.indices[basis.data != 0]] = True
-    held = _held_poles(face, tied)
-    for side in turned:
-        held |= _row_mask(shape, side, second=True)
-    cols = np.flatnonzero(free & ~held.ravel())
-    if not len(cols):
-        log.info("G1: face %d: every pole around its trimming curves is held", face.index)
-        return
-    n = len(cols)
-
-    def each(basis: np.ndarray) -> list[np.ndarray]:
-        """``basis (m, n)`` for x, y and z, one block of columns each: rows ``(3 m, 3 n)``."""
-        zero = np.zeros_like(basis)
-        return [np.hstack([basis, zero, zero]), np.hstack([zero, basis, zero]), np.hstack([zero, zero, basis])]
-
-    spans = [np.diff(knot_breaks(k, p)).mean() for k, p in ((surface.u_knots, surface.u_degree),
-                                                            (surface.v_knots, surface.v_degree))]
-    conditions, targets = [], []
-    for basis, step in zip((du, dv), spans):
-        tangent = basis @ flat
-        block = step * basis[:, cols].toarray()
-        # a point whose tangent the held poles mostly make (next to a side held by an edge) cannot turn
-        # without bending the face: the corner correction decides there
-        total = np.asarray(abs(basis).sum(axis=1)).ravel()
-        turnable = np.abs(block).sum(axis=1) >= TURNABLE_SHARE * step * total
-        conditions.append(np.hstack([normal[turnable, c:c + 1] * block[turnable] for c in range(3)]))  # eq. 65
-        targets.append(-step * np.sum(tangent * normal, axis=1)[turnable])
-    stay = [at[:, cols].toarray()]
-    corrected = {t.edge for t in tasks}
-    for use in face.uses:
-        if use.edge in corrected or side_along(face.surface, use) is not None:
+    face = part.faces[k]
+    hot, cold = face.surface, surfaces[k]
+    spans = [np.diff(knot_breaks(knots, p)).mean() for knots, p in ((hot.u_knots, hot.u_degree),
+                                                                    (hot.v_knots, hot.v_degree))]
+    rows, targets = [], []
+    for te in edges:
+        if k not in te.faces or te.sides[te.faces.index(k)] is not None:
             continue
-        basis = surface_basis(surface, use.uv[:, 0], use.uv[:, 1])[:, cols].toarray()
-        stay.append(basis[np.abs(basis).sum(axis=1) > 0])
-    stay = np.concatenate(stay)
-    rows = [ALONG_TURN_WEIGHT * np.concatenate(conditions), ALONG_STAY_WEIGHT * np.concatenate(each(stay)),
-            ALONG_DAMPING * np.eye(3 * n)]
-    if inside is not None and len(inside):
-        change = surface_basis(surface, inside[:, 0], inside[:, 1])[:, cols].toarray()
-        rows += each(change[np.abs(change).sum(axis=1) > 0])
-    rhs = np.zeros(sum(len(r) for r in rows))
-    rhs[:len(rows[0])] = ALONG_TURN_WEIGHT * np.concatenate(targets)
-    sol = solve_tsvd(np.concatenate(rows), rhs, ALONG_EPSILON)
-    moves = sol.x.reshape(3, n).T
-    poles = surface.poles.copy()
-    poles.reshape(-1, 3)[cols] += moves
-    surfaces[face.index] = surface.with_poles(poles)
-    log.debug("G1: face %d turned about its trimming curves %s: the face moved up to %.3g mm along them, "
-              "its poles up to %.3g mm", face.index, sorted(corrected),
-              float(np.linalg.norm(at[:, cols] @ moves, axis=1).max()), float(np.abs(moves).max()))
+        other = te.faces[1 - te.faces.index(k)]
+        use, use_o = _use_of(face, te.edge), _use_of(part.faces[other], te.edge)
+        t = np.linspace(min(use.t[0], use.t[-1]), max(use.t[0], use.t[-1]),
+                        max(n_points_factor * sum(hot.shape), 2))
+        uv, uv_o = _uv_at(use, t), _uv_at(use_o, t)
+        n = surface_normals(cold, uv[:, 0], uv[:, 1])
+        n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
+        keep = np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1)
+        n_t = n_o if other in kept else n + np.where(np.sum(n * n_o, axis=1) < 0, -1.0, 1.0)[:, None] * n_o
+        n_t = n_t[keep] / np.linalg.norm(n_t[keep], axis=1, keepdims=True)
+        bases = surface_derivative_bases(hot, uv[keep, 0], uv[keep, 1])
+        for basis, step in zip(bases, spans):
+            tangent = basis @ cold.poles.reshape(-1, 3)
+            wanted = tangent - np.sum(tangent * n_t, axis=1)[:, None] * n_t                 # eq. (65)
+            rows.append(weight * step * basis.toarray())
+            targets.append(weight * step * (wanted - basis @ hot.poles.reshape(-1, 3)))
+    if not rows:
+        return np.zeros((0, hot.shape[0] * hot.shape[1])), np.zeros((0, 3))
+    return np.concatenate(rows), np.concatenate(targets)
 
 
 # ------------------------------------------------------------------------------------------------------
