@@ -193,7 +193,7 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     """Morph one face with its boundary taken from the morphed edges.
 
     ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
-    (sparse or dense) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
+    (sparse) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
     into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed

@@ -30,6 +30,7 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import sparse
 
 from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, surface_derivative_bases,
                             surface_normals)
@@ -429,7 +430,7 @@ def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
     rows ``weight * h * dR_i/du(u_q, v_q)`` (``h``: the mean knot span, so that the rows are
     lengths, mm) against the pole displacements from the hot face, the targets less the hot tangents.  In
     the fit itself, next to the face's nodes, the face turns where its nodes let it.  Returns the rows
-    ``(r, nu * nv)`` and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
+    ``(r, nu * nv)`` (sparse) and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
     """
     face = part.faces[k]
     hot, cold = face.surface, surfaces[k]
@@ -453,11 +454,11 @@ def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
         for basis, step in zip(bases, spans):
             tangent = basis @ cold.poles.reshape(-1, 3)
             wanted = tangent - np.sum(tangent * n_t, axis=1)[:, None] * n_t                 # eq. (65)
-            rows.append(weight * step * basis.toarray())
+            rows.append(weight * step * basis)
             targets.append(weight * step * (wanted - basis @ hot.poles.reshape(-1, 3)))
     if not rows:
-        return np.zeros((0, hot.shape[0] * hot.shape[1])), np.zeros((0, 3))
-    return np.concatenate(rows), np.concatenate(targets)
+        return sparse.csr_array((0, hot.shape[0] * hot.shape[1])), np.zeros((0, 3))
+    return sparse.vstack(rows, format="csr"), np.concatenate(targets)
 
 
 # ------------------------------------------------------------------------------------------------------

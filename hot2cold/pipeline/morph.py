@@ -281,6 +281,7 @@ class MorphContext:
         turning = {f for e in along for f, side in zip(e.faces, e.sides) if side is None}
         kept: set[int] = set(range(len(part.faces))) - turning    # faces that keep their fits along the curves
         refits: dict[int, FaceMorph] = {}
+        refused: dict[int, str] = {}
         for _ in range(_G1_ROUNDS):       # both faces turn to the common plane; a face that may not turn (it
             refits = {}                   # would leave the field) keeps its fit, and the other turns to it
             for k in sorted(turning - kept):
@@ -293,6 +294,7 @@ class MorphContext:
             if not off:
                 break
             kept |= set(off)
+            refused.update(off)
         turned = set(refits) - kept
         for k in turned:
             face_morphs[k] = refits[k]
@@ -311,9 +313,15 @@ class MorphContext:
             log.warning("G1: faces %s keep their fits: %s", sorted(off), "; ".join(off.values()))
             corrected = [surfaces[k] if k in off else c for k, c in enumerate(corrected)]
         for r, report in enumerate(reports):
-            if report.edge in plain and turned & set(report.faces):
+            if report.edge not in plain:
+                continue
+            if turned & set(report.faces):
+                method = f"{report.method}; {ALONG_CURVE}" if report.corrected else ALONG_CURVE
                 reports[r] = replace(report, kink_before_max=plain[report.edge], corrected=True, reason="",
-                                     method=ALONG_CURVE if not report.corrected else report.method)
+                                     method=method)
+            elif not report.corrected and refused.keys() & set(report.faces):
+                reports[r] = replace(report, kink_before_max=plain[report.edge], reason="; ".join(
+                    refused[f] for f in report.faces if f in refused))
         return ([replace(f, surface=surface) for f, surface in zip(face_morphs, corrected)],
                 with_corners(part, reports, corners))
 

@@ -260,7 +260,7 @@ class Report:
             lines.append(f"G1: {len(self.g1)} tangent edges ({fixed} corrected), kink before {before:.3g}°, "
                          f"after {after:.3g}°")
             for g in self.g1:
-                how = g.get("method") or "corrected" if g["corrected"] else f"not corrected: {g['reason']}"
+                how = (g.get("method") or "corrected") if g["corrected"] else f"not corrected: {g['reason']}"
                 lines.append(f"  edge {g['edge']} (faces {g['faces'][0]}, {g['faces'][1]}): kink "
                              f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how})")
         if self.tolerance is not None:
