@@ -189,8 +189,12 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
 def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
                edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
                settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-               noise: float = 0.0) -> FaceMorph:
+               noise: float = 0.0, turn: tuple | None = None) -> FaceMorph:
     """Morph one face with its boundary taken from the morphed edges.
+
+    ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
+    (sparse) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
+    into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
     domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
@@ -251,6 +255,12 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         basis.data *= np.repeat(weight, np.diff(basis.indptr))                      # rows weighted in place
         flat = delta.reshape(-1, 3)
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
+        if turn is not None:
+            from scipy import sparse
+
+            extra = sparse.csr_array(turn[0])
+            rhs = np.vstack([rhs, turn[1] - extra[:, ~free] @ flat[~free]])
+            basis = sparse.vstack([basis, extra], format="csr")
         sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon,                   # eq. (19)-(20)
                          prior=lambda: _field_prior(surface, free, delta, estimator), noise=noise,
                          noisy_rows=len(nodes))

@@ -30,15 +30,22 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import sparse
 
-from ..core.bspline import BSplineCurve, BSplineSurface, surface_derivative_bases, surface_normals
+from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, surface_derivative_bases,
+                            surface_normals)
 from ..core.lstsq import solve_tsvd
 from ..core.model import EdgeUse, Face, Part, Side, side_along
 
 log = logging.getLogger(__name__)
 
-#: Reason given for an edge that is not a whole side of both faces' surfaces (trimmed faces, split sides).
+#: Reason given for an edge that is not a whole side of both faces' surfaces (trimmed faces, split sides), where
+#: the second rows cannot turn the faces (:func:`correct_g1`; the morph turns them in their fits, :func:`turn_rows`).
 NOT_ISO_SIDE = "the edge is not on a side of the surface"
+#: How an edge was corrected: the second rows of poles of faces that have it on a side (eq. 56-75) ...
+SECOND_ROWS = "second rows (eq. 56-75)"
+#: ... or the fit of a face that has it inside its domain, its tangents there turned (:func:`turn_rows`).
+ALONG_CURVE = "fit turned along the trimming curve"
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,8 +79,10 @@ class G1Report:
     hot_angle_max : float, largest angle between the normal lines of the hot faces along the edge.
     kink_before_max, kink_after_max : float, the same on the morphed surfaces before and after the
         correction (equal when nothing was corrected; NaN where no normal is defined).
-    corrected : bool, whether second rows of poles were moved.
+    corrected : bool, whether the faces were turned.
     reason : str, why not (empty when corrected).
+    method : str, how (empty when not corrected): :data:`SECOND_ROWS` where the faces that turned have the
+        edge on a side, :data:`ALONG_CURVE` where a face has it inside its domain (a trimming curve).
     """
 
     edge: int
@@ -83,6 +92,7 @@ class G1Report:
     kink_after_max: float
     corrected: bool
     reason: str
+    method: str = ""
 
 
 def kink_angles(surface_a: BSplineSurface, uv_a: np.ndarray, surface_b: BSplineSurface,
@@ -363,7 +373,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     for te, (uv_a, uv_b), kb, reason in zip(edges, matched, before, reasons):
         # measured on the final surfaces for every edge: a face's other corrections may touch this one too
         after = _max(kink_angles(surfaces[te.faces[0]], uv_a, surfaces[te.faces[1]], uv_b))
-        reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason))
+        reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason,
+                                "" if reason else SECOND_ROWS))
         if not reason:
             log.info("G1: edge %d (faces %d, %d): kink %.3g -> %.3g deg", te.edge, *te.faces, kb, after)
     return surfaces, reports
@@ -401,6 +412,53 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ..
     poles = surface.poles.copy()
     poles.reshape(-1, 3)[cols] += sol.x
     surfaces[face.index] = surface.with_poles(poles)
+
+
+#: Weight of the rows of :func:`turn_rows` in a face's fit, against the FE nodes' (1 each; rows in mm).
+TURN_WEIGHT = 10.0
+
+
+def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
+              n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray]:
+    """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that turn its
+    tangents along those of ``edges`` that lie inside its domain into the common planes.
+
+    At ``n_points_factor * (nu + nv)`` points ``(u_q, v_q)`` along each such edge, with ``n`` the unit normal of
+    the common plane of the two morphed ``surfaces`` there (eq. 63) and ``S_u``, ``S_v`` the face's
+    tangents, the fit is asked for ``S_u - (S_u . n) n`` and ``S_v - (S_v . n) n`` (eq. 64-65, per parameter
+    direction; where the other face is in ``kept``, faces that do not turn, its own tangent plane instead):
+    rows ``weight * h * dR_i/du(u_q, v_q)`` (``h``: the mean knot span, so that the rows are
+    lengths, mm) against the pole displacements from the hot face, the targets less the hot tangents.  In
+    the fit itself, next to the face's nodes, the face turns where its nodes let it.  Returns the rows
+    ``(r, nu * nv)`` (sparse) and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
+    """
+    face = part.faces[k]
+    hot, cold = face.surface, surfaces[k]
+    spans = [np.diff(knot_breaks(knots, p)).mean() for knots, p in ((hot.u_knots, hot.u_degree),
+                                                                    (hot.v_knots, hot.v_degree))]
+    rows, targets = [], []
+    for te in edges:
+        if k not in te.faces or te.sides[te.faces.index(k)] is not None:
+            continue
+        other = te.faces[1 - te.faces.index(k)]
+        use, use_o = _use_of(face, te.edge), _use_of(part.faces[other], te.edge)
+        t = np.linspace(min(use.t[0], use.t[-1]), max(use.t[0], use.t[-1]),
+                        max(n_points_factor * sum(hot.shape), 2))
+        uv, uv_o = _uv_at(use, t), _uv_at(use_o, t)
+        n = surface_normals(cold, uv[:, 0], uv[:, 1])
+        n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
+        keep = np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1)
+        n_t = n_o if other in kept else n + np.where(np.sum(n * n_o, axis=1) < 0, -1.0, 1.0)[:, None] * n_o
+        n_t = n_t[keep] / np.linalg.norm(n_t[keep], axis=1, keepdims=True)
+        bases = surface_derivative_bases(hot, uv[keep, 0], uv[keep, 1])
+        for basis, step in zip(bases, spans):
+            tangent = basis @ cold.poles.reshape(-1, 3)
+            wanted = tangent - np.sum(tangent * n_t, axis=1)[:, None] * n_t                 # eq. (65)
+            rows.append(weight * step * basis)
+            targets.append(weight * step * (wanted - basis @ hot.poles.reshape(-1, 3)))
+    if not rows:
+        return sparse.csr_array((0, hot.shape[0] * hot.shape[1])), np.zeros((0, 3))
+    return sparse.vstack(rows, format="csr"), np.concatenate(targets)
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -259,6 +259,10 @@ class Report:
             fixed = sum(bool(g["corrected"]) for g in self.g1)
             lines.append(f"G1: {len(self.g1)} tangent edges ({fixed} corrected), kink before {before:.3g}°, "
                          f"after {after:.3g}°")
+            for g in self.g1:
+                how = (g.get("method") or "corrected") if g["corrected"] else f"not corrected: {g['reason']}"
+                lines.append(f"  edge {g['edge']} (faces {g['faces'][0]}, {g['faces'][1]}): kink "
+                             f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how})")
         if self.tolerance is not None:
             noise = (f" + {self.allowance:.3g} mm for the field's scatter ({self.scatter:.3g} mm about a smooth "
                      f"field)" if self.allowance > 0.1 * self.tolerance else "")

@@ -109,7 +109,7 @@ def _edge_table(report) -> str:
             kink = ["–", "–", "–"]
         else:
             kink = [_deg(g["kink_before_max"]), _deg(g["kink_after_max"]),
-                    "corrected" if g["corrected"] else _e(g["reason"] or "not corrected")]
+                    _e(g.get("method") or "corrected") if g["corrected"] else _e(g["reason"] or "not corrected")]
         rows.append([str(e.index), _e(" ".join(map(str, e.faces))), str(e.nodes), str(e.control_points),
                      _mm(e.delta_max), _mm(e.delta_mean), _mm(e.gap), *kink])
     return _table(["edge", "faces", "FE nodes", "control points", "Δmax [mm]", "Δmean [mm]",
@@ -177,11 +177,12 @@ def _g1(report) -> str:
     fixed = sum(bool(g["corrected"]) for g in report.g1)
     rows = [[str(g["edge"]), _e(" ".join(map(str, g["faces"]))), _deg(g["hot_angle_max"]),
              _deg(g["kink_before_max"]), _deg(g["kink_after_max"]),
-             "yes" if g["corrected"] else _e(g["reason"] or "no")] for g in report.g1]
+             _e(g.get("method") or "yes") if g["corrected"] else _e(g["reason"] or "no")] for g in report.g1]
     return (f"<p>{len(report.g1)} tangent edges, {fixed} corrected; largest kink before "
             f"{_deg(before)}, after {_deg(after)} (the angle between the two faces' normals along the edge, "
             f"paper section 5).</p>"
-            + _table(["edge", "faces", "hot angle", "kink before", "kink after", "corrected"], rows, left={1, 5}))
+            + _table(["edge", "faces", "hot angle", "kink before", "kink after", "corrected (how)"], rows,
+                     left={1, 5}))
 
 
 def _timings(report) -> str:
