@@ -7,12 +7,20 @@ factor times the diagonal of the part's bounding box.
 """
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 import numpy as np
 
 #: Single-precision machine epsilon, the paper's FLT_EPSILON in the SVD cut-off of eq. (20).
 FLT_EPSILON = float(np.finfo(np.float32).eps)
+
+
+class Continuity(enum.Enum):
+    """How smooth the morph keeps the edges along which the hot faces met smoothly."""
+
+    G1 = "g1"      #: tangent planes restored along tangent edges (paper section 5, eq. 56-75)
+    G2 = "g2"      #: and the normal curvature across edges that were curvature-continuous when hot
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,16 @@ class Settings:
     g1_angle : float or None
         Edges where the hot faces meet within this angle (degrees) are tangent; after the morph their
         kink is corrected (paper section 5).  None: no G1 correction.
+    continuity : Continuity
+        ``Continuity.G2`` (or "g2") also restores curvature continuity, the paper's outlook: across tangent
+        edges where the hot faces' normal curvatures agreed within ``g2_tolerance``, the faces are fitted
+        again with their curvature across the edge asked to be common (:mod:`hot2cold.pipeline.g2`), where
+        that keeps them within 10 % of their plain fit's distance from the field.  With G1 (the default) the
+        curvature jumps are measured and reported only.
+    g2_tolerance : float
+        The largest jump of the normal curvature across an edge, as a share of the edge's largest curvature
+        (or of one over the part's diagonal, for nearly flat faces), at which the faces count as
+        curvature-continuous; the G2 correction aims to keep the cold jump within it.
     edge_samples_per_span : int
         Points per knot span at which a morphed edge that is not an iso-curve of a face constrains that
         face's fit (keeps trimmed faces on their edges).
@@ -114,12 +132,21 @@ class Settings:
     smooth: bool = True
     max_refinements: int = 8
     g1_angle: float | None = 1.0
+    continuity: Continuity = Continuity.G1
+    g2_tolerance: float = 0.01
     blas_threads: int | None = None
     extrapolate: bool = False
     element_points: bool = True
     max_displacement_rel: float = 0.1
 
     def __post_init__(self):
+        try:
+            object.__setattr__(self, "continuity", Continuity(self.continuity))
+        except ValueError:
+            raise ValueError(f"continuity must be one of {', '.join(c.value for c in Continuity)}, "
+                             f"got {self.continuity!r}") from None
+        if not (np.isfinite(self.g2_tolerance) and self.g2_tolerance > 0):
+            raise ValueError(f"g2_tolerance must be a positive share, got {self.g2_tolerance!r}")
         for name in ("node_distance", "edge_distance", "tolerance"):
             value = getattr(self, name)
             if value is not None and not (np.isfinite(value) and value > 0):

@@ -10,7 +10,7 @@ from OCP.GeomLProp import GeomLProp_SLProps
 from OCP.gp import gp_Pnt, gp_Vec
 
 from hot2cold.core.bspline import (BSplineSurface, mean_curvature, surface_derivatives, surface_normals,
-                              surface_second_derivatives)
+                                   surface_second_derivative_bases, surface_second_derivatives)
 from hot2cold.kernel.convert import record_to_surface
 
 from test_bspline import random_knots, random_surface, surface_params, xyz
@@ -29,6 +29,20 @@ def _kernel_second(g, u, v):
         out[1].append(xyz(duv))
         out[2].append(xyz(dvv))
     return tuple(np.array(x) for x in out)
+
+
+@pytest.mark.parametrize("p,q,rational", CASES)
+def test_second_derivative_bases_match_kernel(p, q, rational):
+    """The bases of the fit rows (linear in the poles, weights fixed) give the kernel's D2."""
+    rng = np.random.default_rng(3000 * p + 300 * q + 30 * rational)
+    s = random_surface(rng, p, q, rational)
+    u, v = surface_params(rng, s)
+    bases = surface_second_derivative_bases(s, u, v)
+    theirs = _kernel_second(record_to_surface(s), u, v)
+    floor = float(np.abs(s.poles).max())
+    for basis, b in zip(bases, theirs):
+        assert basis.shape == (len(u), s.shape[0] * s.shape[1])
+        assert _rel_err(basis @ s.poles.reshape(-1, 3), b, floor) < 1e-9
 
 
 def _kernel_mean(g, u, v):

@@ -317,10 +317,11 @@ def _surface_parameters(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.n
 
 
 def _surface_rows(surface: BSplineSurface, u, v, nu: int):
-    """Fixed-width tensor-product rows up to first derivatives (``nu`` is 0 or 1).
+    """Fixed-width tensor-product rows up to derivatives of order ``nu`` (0, 1 or 2).
 
     Returns the column indices ``cols`` (m, (p+1)(q+1)) and a list of value arrays of that shape: the
-    (rational if weighted) basis and, if ``nu == 1``, its u- and v-derivatives.
+    (rational if weighted) basis, if ``nu >= 1`` its u- and v-derivatives, and if ``nu == 2`` its uu-, uv-
+    and vv-derivatives.
     """
     uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
@@ -337,12 +338,21 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     vals = [kron(bu[0], bv[0])]
     if nu:
         vals += [kron(bu[1], bv[0]), kron(bu[0], bv[1])]
+    if nu > 1:
+        vals += [kron(bu[2], bv[0]), kron(bu[1], bv[1]), kron(bu[0], bv[2])]
     if surface.weights is not None:
+        # quotient rule on R = A / W, A = w N (columns), W = sum A, and their derivatives
         wcols = surface.weights.reshape(-1)[cols]
         a = [x * wcols for x in vals]
-        wsum = [x.sum(axis=1, keepdims=True) for x in a]
-        r0 = a[0] / wsum[0]
-        vals = [r0] + [(a[k] - wsum[k] * r0) / wsum[0] for k in range(1, len(a))]
+        w = [x.sum(axis=1, keepdims=True) for x in a]
+        r = [a[0] / w[0]]
+        if nu:
+            r += [(a[k] - w[k] * r[0]) / w[0] for k in (1, 2)]
+        if nu > 1:
+            r += [(a[3] - 2.0 * w[1] * r[1] - w[3] * r[0]) / w[0],
+                  (a[4] - w[1] * r[2] - w[2] * r[1] - w[4] * r[0]) / w[0],
+                  (a[5] - 2.0 * w[2] * r[2] - w[5] * r[0]) / w[0]]
+        vals = r
     return cols, vals
 
 
@@ -382,6 +392,18 @@ def surface_derivative_bases(surface: BSplineSurface, u, v) -> tuple[_sparse.csr
     cols, (_, du, dv) = _surface_rows(surface, u, v, 1)
     n = surface.shape[0] * surface.shape[1]
     return _cols_to_csr(cols, du, n), _cols_to_csr(cols, dv, n)
+
+
+def surface_second_derivative_bases(surface: BSplineSurface, u, v
+                                    ) -> tuple[_sparse.csr_array, _sparse.csr_array, _sparse.csr_array]:
+    """Bases of the second partial derivatives ``(d2S/du2, d2S/dudv, d2S/dv2)``, each an (m, nu * nv)
+    ``csr_array`` with the columns of :func:`surface_basis`: ``B_uu @ poles.reshape(-1, 3)`` is ``S_uu``
+    (m, 3).  Rational surfaces by the quotient rule (weights fixed, so the derivatives are linear in the
+    poles); at a knot the span on the larger-parameter side, as :func:`surface_derivative_bases`.
+    """
+    cols, vals = _surface_rows(surface, u, v, 2)
+    n = surface.shape[0] * surface.shape[1]
+    return tuple(_cols_to_csr(cols, x, n) for x in vals[3:])
 
 
 def clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:

@@ -83,6 +83,12 @@ class G1Report:
     reason : str, why not (empty when corrected).
     method : str, how (empty when not corrected): :data:`SECOND_ROWS` where the faces that turned have the
         edge on a side, :data:`ALONG_CURVE` where a face has it inside its domain (a trimming curve).
+    jump_hot, jump_before, jump_after : float, the largest jump of the normal curvature across the edge on
+        the hot faces, on the morphed ones before the G2 correction (after G1) and after it, each as a share
+        of the curvature where it happens (:func:`hot2cold.pipeline.g2.edge_jump`; NaN where not measured).
+    g2 : bool, whether the hot faces were curvature-continuous there (``jump_hot`` within the G2 tolerance).
+    g2_reason : str, for such an edge, how its curvature was corrected, or why not; empty when it was not
+        asked for (``Settings.continuity`` G1) or not needed.
     """
 
     edge: int
@@ -93,6 +99,11 @@ class G1Report:
     corrected: bool
     reason: str
     method: str = ""
+    jump_hot: float = float("nan")
+    jump_before: float = float("nan")
+    jump_after: float = float("nan")
+    g2: bool = False
+    g2_reason: str = ""
 
 
 def kink_angles(surface_a: BSplineSurface, uv_a: np.ndarray, surface_b: BSplineSurface,
@@ -419,9 +430,11 @@ TURN_WEIGHT = 10.0
 
 
 def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
-              n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[np.ndarray, np.ndarray]:
+              n_points_factor: int = 2, kept: frozenset = frozenset(), sides: bool = False
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that turn its
-    tangents along those of ``edges`` that lie inside its domain into the common planes.
+    tangents along those of ``edges`` that lie inside its domain (with ``sides``, along all of them) into the
+    common planes.
 
     At ``n_points_factor * (nu + nv)`` points ``(u_q, v_q)`` along each such edge, with ``n`` the unit normal of
     the common plane of the two morphed ``surfaces`` there (eq. 63) and ``S_u``, ``S_v`` the face's
@@ -438,7 +451,7 @@ def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
                                                                     (hot.v_knots, hot.v_degree))]
     rows, targets = [], []
     for te in edges:
-        if k not in te.faces or te.sides[te.faces.index(k)] is not None:
+        if k not in te.faces or (te.sides[te.faces.index(k)] is not None and not sides):
             continue
         other = te.faces[1 - te.faces.index(k)]
         use, use_o = _use_of(face, te.edge), _use_of(part.faces[other], te.edge)

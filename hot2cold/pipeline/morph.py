@@ -1,8 +1,8 @@
 """The hot-to-cold morph, end to end, in the order of the paper.
 
 load -> classify nodes -> edges (one tangent plane at the corners of tangent edges) -> faces (with
-artificial nodes; refined to the tolerance, 1e-3 mm by default, unless the knots are kept) -> G1 -> rebuild ->
-sew -> check -> report
+artificial nodes; refined to the tolerance, 1e-3 mm by default, unless the knots are kept) -> G1 -> G2
+(measured; corrected on request) -> rebuild -> sew -> check -> report
 
 The input is checked on the way (an open hot solid, a field that misses the part or some of its faces) and
 so is the cold part after the sew (a face folded over, a solid turned inside out or crossing itself):
@@ -24,6 +24,7 @@ from functools import cached_property
 from typing import Callable
 
 import numpy as np
+from scipy import sparse
 from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
@@ -35,6 +36,7 @@ from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners, correct_g1,
                  edge_decided, kink_added, kink_bound, surface_corner_normals, tangent_edges, turn_rows, with_corners)
+from .g2 import BEND_WEIGHT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
@@ -50,7 +52,7 @@ from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
 from .refine import TARGET_SHARE, Targets, edge_errors, noise_allowance, refine
 from .report import Checks, Fits, Report, build_report, node_errors
-from ..settings import Settings
+from ..settings import Continuity, Settings
 
 __all__ = ["MorphContext", "MorphResult", "Progress", "check_result", "morph"]
 
@@ -70,6 +72,11 @@ _G1_ROUNDS = 3
 #: than its plain fit, or this share of the tolerance (:meth:`MorphContext._moved_off`): Handle_SO101 under a
 #: smooth field went from 2.75e-4 to 7.06e-4 mm off the exact cold geometry when turned within the tolerance.
 _TURN_SHARE = 0.1
+#: A face bent to a common curvature (G2) may leave its tangent edges kinked up to this angle (degrees) above
+#: their hot angle, issue 15's promise, where they were less kinked before.
+_G2_KINK_DEG = 0.01
+#: How an edge's curvature jump was corrected (``G1Report.g2_reason``).
+_BENT = "faces fitted again with a common curvature across the edge"
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
@@ -339,6 +346,85 @@ class MorphContext:
         return ([replace(f, surface=surface) for f, surface in zip(face_morphs, corrected)],
                 with_corners(part, reports, corners))
 
+    def correct_g2(self, face_morphs: list[FaceMorph], reports: list[G1Report], grids: list[FaceGrid],
+                   edge_morphs: list[EdgeMorph]) -> tuple[list[FaceMorph], list[G1Report]]:
+        """The jump of the normal curvature across each tangent edge measured on the hot faces, on
+        ``face_morphs`` (after G1) and, with ``Settings.continuity`` G2, removed where the hot faces were
+        curvature-continuous: both faces fitted again with rows that give them the common curvature across
+        the edge and keep their tangents in the common plane (:func:`~hot2cold.pipeline.g2.bend_rows`,
+        :func:`~hot2cold.pipeline.g1.turn_rows`).  A face keeps its fit, and the other bends to it, where the
+        new one would go more than 10 % farther from the field, or leave one of its tangent edges more
+        kinked than both now and 0.01 degrees above its hot angle.  Returns the face morphs and the
+        reports with their G2 fields."""
+        part, settings = self.part, self.settings
+        hot = [face.surface for face in part.faces]
+        surfaces = [f.surface for f in face_morphs]
+        by_edge = {te.edge: te for te in self.tangent}
+        jumps = {r.edge: (edge_jump(part, hot, by_edge[r.edge]), edge_jump(part, surfaces, by_edge[r.edge]))
+                 for r in reports}
+        smooth = [by_edge[e] for e, (hot_jump, _) in jumps.items() if hot_jump <= settings.g2_tolerance]
+        bent_faces: set[int] = set()
+        refused: dict[int, str] = {}
+        if settings.continuity is Continuity.G2:
+            bend = [te for te in smooth if jumps[te.edge][1] > settings.g2_tolerance]
+            kinks = {te.edge: kink_added(part, surfaces, te) + te.hot_angle_max for te in self.tangent}
+            faces = {k for te in bend for k in te.faces}
+            kept = set(range(len(part.faces))) - faces
+            refits: dict[int, FaceMorph] = {}
+            for _ in range(_G1_ROUNDS):
+                refits = {}
+                for k in sorted(faces - kept):
+                    turn = turn_rows(part, surfaces, self.tangent, k, TANGENT_WEIGHT, kept=frozenset(kept), sides=True)
+                    bent = bend_rows(part, surfaces, bend, k, BEND_WEIGHT, kept=frozenset(kept))
+                    refits[k] = self.fit_face(part, part.faces[k], edge_morphs,
+                                              (sparse.vstack([turn[0], bent[0]], format="csr"),
+                                               np.concatenate([turn[1], bent[1]])))
+                off = {k: self._moved_off(k, surfaces[k], refit.surface, grids[k], _TURN_SHARE, "bending")
+                       for k, refit in refits.items()}
+                off = {k: why for k, why in off.items() if why}
+                trial = [refits[k].surface if k in refits and k not in off else s for k, s in enumerate(surfaces)]
+                for te in self.tangent:
+                    now = kink_added(part, trial, te) + te.hot_angle_max
+                    if now > max(kinks[te.edge], te.hot_angle_max + _G2_KINK_DEG) + _KINK_NOISE_DEG:
+                        for k in set(te.faces) & set(refits) - set(off):
+                            off[k] = (f"bending face {k} would kink edge {te.edge} to {now:.3g} deg "
+                                      f"({kinks[te.edge]:.3g} before)")
+                for k, why in off.items():
+                    log.info("G2: face %d not bent: %s", k, why)
+                if not off:
+                    break
+                kept |= set(off)
+                refused.update(off)
+            bent_faces = set(refits) - kept
+            for k in bent_faces:
+                face_morphs[k] = refits[k]
+            after = [f.surface for f in face_morphs]
+            # the G1 reports are measured again where a face bent
+            reports = [r if not bent_faces & set(r.faces) else replace(
+                r, kink_after_max=kink_added(part, after, by_edge[r.edge]) + by_edge[r.edge].hot_angle_max)
+                for r in reports]
+            surfaces_after = after
+        else:
+            surfaces_after = surfaces
+        out = []
+        for r in reports:
+            hot_jump, before = jumps[r.edge]
+            is_g2 = hot_jump <= settings.g2_tolerance
+            now = before
+            why = ""
+            if is_g2 and settings.continuity is Continuity.G2:
+                now = edge_jump(part, surfaces_after, by_edge[r.edge])
+                if bent_faces & set(r.faces):
+                    why = _BENT
+                elif before > settings.g2_tolerance:
+                    why = "; ".join(refused[f] for f in r.faces if f in refused) or "no face could bend"
+            out.append(replace(r, jump_hot=hot_jump, jump_before=before, jump_after=now, g2=is_g2,
+                               g2_reason=why))
+            if is_g2 and settings.continuity is Continuity.G2:
+                log.info("G2: edge %d (faces %d, %d): curvature jump %.3g -> %.3g of the curvature (%s)", r.edge,
+                         *r.faces, before, now, why or "within the tolerance")
+        return face_morphs, out
+
     def _edge_moved_off(self, e: int, before: EdgeMorph, after: BSplineCurve) -> str:
         """Why edge ``e`` may not take the corner-corrected curve ``after`` in place of its fit ``before``: its
         largest distance to its nodes' cold targets (eq. 21) would exceed the tolerance, and what it was
@@ -356,7 +442,7 @@ class MorphContext:
                f"{was.max():.2g} before)"
 
     def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
-                   share: float | None = None) -> str:
+                   share: float | None = None, verb: str = "turning") -> str:
         """Why face ``k`` may not take the G1-corrected surface ``after`` in place of ``before`` (its fit): its
         largest distance to its nodes' cold targets (eq. 21) or to the field's estimate over its ``grid``
         would exceed the tolerance, and what it was before; "" if it may.  A plane raised to cubic over a
@@ -379,7 +465,7 @@ class MorphContext:
         allowed = max(limit, was) if share is None else max((1.0 + share) * was, share * limit)
         if now <= allowed:
             return ""
-        return (f"turning face {k} would take it {now:.2g} mm off the field ({allowed:.2g} mm allowed, "
+        return (f"{verb} face {k} would take it {now:.2g} mm off the field ({allowed:.2g} mm allowed, "
                 f"{was:.2g} before)")
 
 
@@ -548,6 +634,9 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
         edge_morphs, face_morphs, more = context.anchor_corners(edge_morphs, face_morphs)
         face_morphs, g1_reports = context.correct_g1(face_morphs, corners + more, grids, edge_morphs)
         stages.lap("g1")
+        # G2 (the paper's outlook): the curvature jumps across them measured, and removed if asked
+        face_morphs, g1_reports = context.correct_g2(face_morphs, g1_reports, grids, edge_morphs)
+        stages.lap("g2")
     fits = Fits(face_morphs, edge_morphs, tuple(refinements), tuple(edge_refinements), tuple(g1_reports))
 
     # rebuild, sew and check: the cold geometry in a copy of the kernel shape, tolerances fitted to its gaps
