@@ -23,6 +23,8 @@ import pytest
 
 from hot2cold import morph
 from hot2cold.pipeline.g1 import ALONG_CURVE, kink_angles, tangent_edges
+from hot2cold.pipeline.g2 import BENT
+from hot2cold.settings import Settings
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 SEAM = math.pi / 2                     # the closed sections start mid suction side
@@ -102,15 +104,21 @@ def trimmed_blade(path: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def solved(tmp_path_factory):
-    """The trimmed blade, its CalculiX field and the morph by default."""
+def blade(tmp_path_factory):
+    """The trimmed blade (STEP) and its CalculiX field (.npz)."""
     from hot2cold.fe.calculix import LoadCase, MeshOptions, hot_to_cold_field
 
     folder = tmp_path_factory.mktemp("trimmed_blade")
     step = trimmed_blade(folder / "trimmed_blade.step")
     hot_to_cold_field(step, folder / "field.npz", mesh=MeshOptions(size=3.0, min_size=0.5),
                       load=LoadCase(omega=1500.0, axis_point=(0.0, 0.0, -150.0), axis_direction=(1.0, 0.0, 0.0)))
-    return morph(step, folder / "field.npz")
+    return step, folder / "field.npz"
+
+
+@pytest.fixture(scope="module")
+def solved(blade):
+    """The morph by default (G1)."""
+    return morph(*blade)
 
 
 @pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
@@ -131,3 +139,34 @@ def test_sides_meeting_along_trimming_curves_are_tangent_after_the_morph(solved)
         g = reports[te.edge]
         assert g["kink_before_max"] > 0.05 and g["corrected"] and g["method"] == ALONG_CURVE
     assert result.report.valid and result.report.tolerance_met and result.report.delta_max <= 1e-3
+
+
+@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+def test_curvature_jumps_are_reported_and_left_alone_by_default(solved):
+    """G1 (the default) measures the curvature jumps: the trimming curves lie inside one hot surface, so
+    their hot jump is 0; the seam of the loft is only C1 when hot (about 11 %), no G2 edge."""
+    reports = {g["edge"]: g for g in solved.report.g1}
+    inside = [te.edge for te in tangent_edges(solved.part) if te.sides == (None, None)]
+    seam = (set(reports) - set(inside)).pop()
+    for e in inside:
+        g = reports[e]
+        assert g["g2"] and g["jump_hot"] == 0.0 and g["g2_reason"] == ""
+        assert g["jump_after"] == g["jump_before"] > 0.01       # measured 1.16 % and 1.41 %
+    assert not reports[seam]["g2"] and reports[seam]["jump_hot"] > 0.05
+    assert "curvature jump" in solved.report.table()
+
+
+@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+def test_continuity_g2_gives_the_sides_one_curvature_along_the_trimming_curves(blade, solved):
+    result = morph(*blade, Settings(continuity="g2"))
+    reports = {g["edge"]: g for g in result.report.g1}
+    plain = {g["edge"]: g for g in solved.report.g1}
+    inside = [te for te in tangent_edges(result.part) if te.sides == (None, None)]
+    for te in inside:
+        g = reports[te.edge]
+        assert g["g2"] and g["g2_reason"] == BENT
+        assert g["jump_before"] == pytest.approx(plain[te.edge]["jump_after"])
+        assert g["jump_after"] <= 0.01 < g["jump_before"]          # measured 0.059 % and 0.021 %
+        assert g["kink_after_max"] <= te.hot_angle_max + 0.01      # still G1: 0.0071 and 0.0070 deg
+    assert result.report.valid and result.report.tolerance_met
+    assert result.report.delta_max <= 1.1 * solved.report.delta_max

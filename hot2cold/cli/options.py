@@ -21,7 +21,7 @@ from typing import Callable
 
 from ..errors import InputError
 from ..io.field import UNITS
-from ..settings import Settings
+from ..settings import Continuity, Settings
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -80,6 +80,17 @@ def to_share(value, folder: Path) -> float:
     if not share > 0:
         raise ValueError(f"must be {must}, got {value!r}")
     return share
+
+
+#: The values of ``--continuity`` (:class:`~hot2cold.settings.Continuity`).
+CONTINUITIES = tuple(c.value for c in Continuity)
+
+
+def to_continuity(value, folder: Path) -> str:
+    key = str(value).strip().lower()
+    if key not in CONTINUITIES:
+        raise ValueError(f"must be one of {', '.join(CONTINUITIES)}, got {value!r}")
+    return key
 
 
 def to_count(value, folder: Path) -> int:
@@ -160,6 +171,10 @@ class MorphOptions:
         False, flag="--nodes-only", convert=to_flag,
         help="use the field's nodes alone, not the FE elements it brings (.frd, VTU cells, an .npz with "
         "triangles): by default the field is also taken inside the boundary elements by their shape functions")
+    continuity: str = _option(
+        "g1", flag="--continuity", convert=to_continuity, type=str, choices=CONTINUITIES,
+        help="g1 (default): the tangent planes restored along edges where the hot faces met tangentially; g2: "
+        "also their curvature across edges where it was continuous when hot (jump within 1%% of the curvature)")
     max_displacement_rel: float | None = _option(
         None, flag="--max-displacement-rel", convert=to_share, type=float, metavar="SHARE",
         help="largest node displacement accepted, as a share of the part's diagonal (default 0.1): a field "
@@ -203,7 +218,7 @@ class MorphOptions:
                 given["tolerance"] = self.tolerance
             return Settings(node_distance=self.node_distance, edge_distance=self.edge_distance,
                             keep_knots=self.keep_knots, extrapolate=self.extrapolate,
-                            element_points=not self.nodes_only, **given)
+                            element_points=not self.nodes_only, continuity=self.continuity, **given)
         except ValueError as exc:
             raise InputError(str(exc)) from exc
 

@@ -36,6 +36,8 @@ from .g1 import TangentEdge, _matched_uv, _use_of, _uv_at
 log = logging.getLogger(__name__)
 
 
+#: How an edge's curvature jump was corrected (``G1Report.g2_reason``).
+BENT = "faces fitted again with a common curvature across the edge"
 #: Weight of the rows of :func:`bend_rows` in a face's fit, against the FE nodes' (1 each; rows in mm).  At 10,
 #: as the tangent rows, the trimmed blade's sides bent at their 0.06 mm trailing edge turned 0.3 deg there.
 BEND_WEIGHT = 0.1

@@ -36,7 +36,7 @@ from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners, correct_g1,
                  edge_decided, kink_added, kink_bound, surface_corner_normals, tangent_edges, turn_rows, with_corners)
-from .g2 import BEND_WEIGHT, TANGENT_WEIGHT, bend_rows, edge_jump
+from .g2 import BEND_WEIGHT, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
@@ -75,8 +75,6 @@ _TURN_SHARE = 0.1
 #: A face bent to a common curvature (G2) may leave its tangent edges kinked up to this angle (degrees) above
 #: their hot angle, issue 15's promise, where they were less kinked before.
 _G2_KINK_DEG = 0.01
-#: How an edge's curvature jump was corrected (``G1Report.g2_reason``).
-_BENT = "faces fitted again with a common curvature across the edge"
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
@@ -415,7 +413,7 @@ class MorphContext:
             if is_g2 and settings.continuity is Continuity.G2:
                 now = edge_jump(part, surfaces_after, by_edge[r.edge])
                 if bent_faces & set(r.faces):
-                    why = _BENT
+                    why = BENT
                 elif before > settings.g2_tolerance:
                     why = "; ".join(refused[f] for f in r.faces if f in refused) or "no face could bend"
             out.append(replace(r, jump_hot=hot_jump, jump_before=before, jump_after=now, g2=is_g2,

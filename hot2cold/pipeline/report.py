@@ -91,6 +91,16 @@ class SolidReport:
         return self.free_edges == 0
 
 
+def _g2_words(g: dict) -> str:
+    """What a tangent edge's report says of its curvature jump (G2): ", curvature jump a % -> b % (how)" on an
+    edge that was curvature-continuous when hot, "" on another."""
+    if not g.get("g2"):
+        return ""
+    change = (f"{100 * g['jump_before']:.2g} %" if g["jump_after"] == g["jump_before"]
+              else f"{100 * g['jump_before']:.2g} % -> {100 * g['jump_after']:.2g} %")
+    return f", curvature jump {change}" + (f" ({g['g2_reason']})" if g.get("g2_reason") else "")
+
+
 @dataclass(frozen=True)
 class Report:
     """Everything a user needs to judge a morph."""
@@ -262,7 +272,7 @@ class Report:
             for g in self.g1:
                 how = (g.get("method") or "corrected") if g["corrected"] else f"not corrected: {g['reason']}"
                 lines.append(f"  edge {g['edge']} (faces {g['faces'][0]}, {g['faces'][1]}): kink "
-                             f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how})")
+                             f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how}){_g2_words(g)}")
         if self.tolerance is not None:
             noise = (f" + {self.allowance:.3g} mm for the field's scatter ({self.scatter:.3g} mm about a smooth "
                      f"field)" if self.allowance > 0.1 * self.tolerance else "")

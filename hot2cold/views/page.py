@@ -177,12 +177,21 @@ def _g1(report) -> str:
     fixed = sum(bool(g["corrected"]) for g in report.g1)
     rows = [[str(g["edge"]), _e(" ".join(map(str, g["faces"]))), _deg(g["hot_angle_max"]),
              _deg(g["kink_before_max"]), _deg(g["kink_after_max"]),
-             _e(g.get("method") or "yes") if g["corrected"] else _e(g["reason"] or "no")] for g in report.g1]
+             _e(g.get("method") or "yes") if g["corrected"] else _e(g["reason"] or "no"),
+             *(_share(g.get(k)) if g.get("g2") else "–" for k in ("jump_before", "jump_after")),
+             _e(g.get("g2_reason") or "") if g.get("g2") else "not curvature-continuous when hot"]
+            for g in report.g1]
     return (f"<p>{len(report.g1)} tangent edges, {fixed} corrected; largest kink before "
             f"{_deg(before)}, after {_deg(after)} (the angle between the two faces' normals along the edge, "
-            f"paper section 5).</p>"
-            + _table(["edge", "faces", "hot angle", "kink before", "kink after", "corrected (how)"], rows,
-                     left={1, 5}))
+            f"paper section 5).  The curvature jump is the largest difference of the two faces' normal "
+            f"curvatures across the edge, as a share of the curvature there, on edges where it was within the "
+            f"G2 tolerance when hot (G2 corrected with <code>--continuity g2</code>).</p>"
+            + _table(["edge", "faces", "hot angle", "kink before", "kink after", "corrected (how)",
+                      "curvature jump before", "after", "G2"], rows, left={1, 5, 8}))
+
+
+def _share(value) -> str:
+    return "–" if value is None or not math.isfinite(value) else f"{100 * value:.2g} %"
 
 
 def _timings(report) -> str:
