@@ -79,8 +79,8 @@ class Settings:
         ``Continuity.G2`` (or "g2") also restores curvature continuity, the paper's outlook: across tangent
         edges where the hot faces' normal curvatures agreed within ``g2_tolerance``, the faces are fitted
         again with their curvature across the edge asked to be common (:mod:`hot2cold.pipeline.g2`), where
-        that keeps them within 10 % of their plain fit's distance from the field.  With G1 (the default) the
-        curvature jumps are measured and reported only.
+        that keeps them within the tolerance (or 10 % of their plain fit's distance from the field, where
+        that is farther).  With G1 (the default) the curvature jumps are measured and reported only.
     g2_tolerance : float
         The largest jump of the normal curvature across an edge, as a share of the edge's largest curvature
         (or of one over the part's diagonal, for nearly flat faces), at which the faces count as
