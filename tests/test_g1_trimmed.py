@@ -158,6 +158,8 @@ def test_curvature_jumps_are_reported_and_left_alone_by_default(solved):
 
 @pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
 def test_continuity_g2_gives_the_sides_one_curvature_along_the_trimming_curves(blade, solved):
+    from hot2cold.views.page import _g1
+
     result = morph(*blade, Settings(continuity="g2"))
     reports = {g["edge"]: g for g in result.report.g1}
     plain = {g["edge"]: g for g in solved.report.g1}
@@ -170,3 +172,6 @@ def test_continuity_g2_gives_the_sides_one_curvature_along_the_trimming_curves(b
         assert g["kink_after_max"] <= te.hot_angle_max + 0.01      # still G1: 0.0071 and 0.0070 deg
     assert result.report.valid and result.report.tolerance_met
     assert result.report.delta_max <= 1.1 * solved.report.delta_max
+    page = _g1(result.report)                       # the page's G1 table: jumps before and after, and how
+    assert "curvature jump before" in page and page.count(BENT) == len(inside)
+    assert "not curvature-continuous when hot" in page                # the seam
