@@ -39,6 +39,7 @@ import argparse
 import contextlib
 import io
 import json
+import math
 import os
 import re
 import resource
@@ -72,6 +73,9 @@ SEED = 0
 #: A tangent edge whose angle after the G1 correction is more than this (degrees) above its hot one is counted
 #: (issue 15: every originally tangent edge within 0.01 deg).
 KINK_LIMIT = 0.01
+#: A curvature jump above this share of the curvature across an edge that was curvature-continuous when hot
+#: (``Settings.g2_tolerance``'s default) is counted.
+G2_LIMIT = 0.01
 
 
 @dataclass
@@ -102,6 +106,9 @@ class Run:
     kink_before: float | None = None    # deg, the largest angle added to a hot one along them before G1
     kink_max: float | None = None       # deg, the largest angle added to a hot one along them after G1
     kinks_over: int | None = None       # how many of them are more than KINK_LIMIT off their hot angle
+    g2_edges: int | None = None         # of them, those curvature-continuous when hot (the report's "g2")
+    g2_over: int | None = None          # how many of those end with a curvature jump above G2_LIMIT
+    g2_max: float | None = None         # the largest curvature jump after the morph on them (share)
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -324,6 +331,9 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
         run.kinks, run.kink_max = len(added), max(added, default=0.0)
         run.kink_before = max((g["kink_before_max"] - g["hot_angle_max"] for g in data.get("g1", [])), default=0.0)
         run.kinks_over = sum(a > KINK_LIMIT for a in added)
+        jumps = [g["jump_after"] for g in data.get("g1", []) if g.get("g2")]
+        run.g2_edges, run.g2_over = len(jumps), sum(j > G2_LIMIT for j in jumps)
+        run.g2_max = max((j for j in jumps if math.isfinite(j)), default=0.0)
     if run.exit_code not in WRITTEN or not cold_path.exists():
         return run
 
@@ -422,7 +432,8 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
     """The table of ``runs`` and the summary line."""
     head = ("part", "CAD system", "faces", "nodes", "field", "exit", "message", "time s", "peak MB", "valid",
             "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "not measured",
-            "kinked edges", f"> {KINK_LIMIT:g}° after G1", "largest kink added ° before G1", "after")
+            "kinked edges", f"> {KINK_LIMIT:g}° after G1", "largest kink added ° before G1", "after",
+            "G2 edges", f"jump > {100 * G2_LIMIT:g} %", "largest jump %")
     rows = []
     for r in runs:
         message = r.message.removeprefix("hot2cold: ").removeprefix("error: ")
@@ -434,7 +445,9 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
                      "-" if r.faces_cold is None else "yes" if r.faces_cold == r.faces else f"{r.faces_cold}",
                      _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e"),
                      "-" if r.unmeasured is None else _faces(r.unmeasured), _num(r.kinks, "d"),
-                     _num(r.kinks_over, "d"), _num(r.kink_before, ".2g"), _num(r.kink_max, ".2g")))
+                     _num(r.kinks_over, "d"), _num(r.kink_before, ".2g"), _num(r.kink_max, ".2g"),
+                     _num(r.g2_edges, "d"), _num(r.g2_over, "d"),
+                     _num(None if r.g2_max is None else 100 * r.g2_max, ".2g")))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     lines.append("")

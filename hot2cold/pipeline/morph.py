@@ -383,13 +383,13 @@ class MorphContext:
                 bend = [te for te in smooth if edge_jump(part, current, te) > settings.g2_tolerance]
                 if not bend:
                     break
-                refits, off = self._bend(current, surfaces, bend, weight, kinks, grids, edge_morphs)
+                refits, off = self._bend(current, surfaces, bend, weight, kinks, grids, edge_morphs, set(refused))
                 refused.update(off)
                 for k, refit in refits.items():
                     face_morphs[k] = refit
                     current[k] = refit.surface
                 bent_faces |= set(refits)
-                if off:
+                if not refits:
                     break
             # the G1 reports are measured again where a face bent
             reports = [r if not bent_faces & set(r.faces) else replace(
@@ -421,16 +421,17 @@ class MorphContext:
         return face_morphs, out
 
     def _bend(self, current: list[BSplineSurface], plain: list[BSplineSurface], bend: list[TangentEdge],
-              weight: float, kinks: dict[int, float], grids: list[FaceGrid], edge_morphs: list[EdgeMorph]
-              ) -> tuple[dict[int, FaceMorph], dict[int, str]]:
+              weight: float, kinks: dict[int, float], grids: list[FaceGrid], edge_morphs: list[EdgeMorph],
+              refused_before: set[int]) -> tuple[dict[int, FaceMorph], dict[int, str]]:
         """The faces of the ``bend`` edges fitted again with bend rows of ``weight`` towards the common
         curvature of the ``current`` surfaces; a face that would go farther from the field than the
         tolerance and 10 % beyond its ``plain`` fit (after G1), or kink a tangent edge beyond ``kinks`` (its
         kink after G1) and 0.01 deg above its hot angle, keeps its surface and the other face bends to it.
-        Returns the refits taken and the faces refused (index -> why)."""
+        Faces in ``refused_before`` (refused at a softer weight) keep their surfaces from the start.  Returns
+        the refits taken and the faces refused (index -> why)."""
         part = self.part
         faces = {k for te in bend for k in te.faces}
-        kept = set(range(len(part.faces))) - faces
+        kept = set(range(len(part.faces))) - faces | refused_before
         refused: dict[int, str] = {}
         refits: dict[int, FaceMorph] = {}
         for _ in range(_G1_ROUNDS):
