@@ -31,7 +31,7 @@ from scipy import sparse
 from ..core.bspline import (BSplineSurface, evaluate_surface, knot_breaks, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
-from .g1 import TangentEdge, _matched_uv, _use_of, _uv_at
+from .g1 import TangentEdge, _matched_uv, _use_of, _uv_at, hot_defined
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +131,10 @@ def edge_jump(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> 
     uv_a, uv_b = _matched_uv(_use_of(part.faces[fa], edge.edge), _use_of(part.faces[fb], edge.edge))
     if len(uv_a) < 2:
         return float("nan")
-    return curvature_jump(surfaces[fa], uv_a, surfaces[fb], uv_b).relative(1.0 / part.diagonal)
+    jump = curvature_jump(surfaces[fa], uv_a, surfaces[fb], uv_b)
+    keep = hot_defined(part, edge.faces, uv_a, uv_b)        # not where a collapsed side's normal is noise
+    return CurvatureJump(np.where(keep, jump.kappa_a, np.nan), np.where(keep, jump.kappa_b, np.nan),
+                         jump.normal).relative(1.0 / part.diagonal)
 
 
 def curvature_continuous(part: Part, edges: list[TangentEdge], tolerance: float) -> list[TangentEdge]:
