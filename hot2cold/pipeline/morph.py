@@ -331,8 +331,8 @@ class MorphContext:
                 if r.kink_after_max > max(r.kink_before_max, r.hot_angle_max + _KINK_PROMISE_DEG) + _KINK_NOISE_DEG:
                     for k in r.faces:
                         if corrected[k] is not surfaces[k] and k not in off:
-                            off[k] = (f"its second rows would kink edge {r.edge} more ({r.kink_before_max:.3g} -> "
-                                      f"{r.kink_after_max:.3g} deg)")
+                            off[k] = (f"the second rows of face {k} would kink edge {r.edge} more "
+                                      f"({r.kink_before_max:.3g} -> {r.kink_after_max:.3g} deg)")
             if not off:
                 break
             frozen.update(off)
@@ -368,6 +368,7 @@ class MorphContext:
         kinked than both now and 0.01 degrees above its hot angle.  Returns the face morphs and the
         reports with their G2 fields."""
         part, settings = self.part, self.settings
+        face_morphs = list(face_morphs)
         hot = [face.surface for face in part.faces]
         surfaces = [f.surface for f in face_morphs]
         by_edge = {te.edge: te for te in self.tangent}
