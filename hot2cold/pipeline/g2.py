@@ -43,8 +43,8 @@ BENT = "faces fitted again with a common curvature across the edge"
 #: sides bent at their 0.06 mm trailing edge turned 0.3 deg there; at 0.1 they meet the tolerance.
 BEND_WEIGHTS = (0.1, 1.0, 10.0)
 #: Weight of the tangent rows (:func:`hot2cold.pipeline.g1.turn_rows`) beside them in the same fit: with 10, as
-#: in G1 alone, the trimmed blade's sides bent to a common curvature kinked 0.011 to 0.025 deg; with 100, at
-#: most 0.0092 deg with the curvature jumps at 0.04 %.
+#: in G1 alone, the trimmed blade's sides bent to a common curvature kinked 0.011 to 0.025 deg; with 100, 0.0071
+#: and 0.0070 deg with the curvature jumps at 0.059 and 0.021 %.
 TANGENT_WEIGHT = 100.0
 
 
@@ -137,16 +137,6 @@ def edge_jump(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> 
                          jump.normal).relative(1.0 / part.diagonal)
 
 
-def curvature_continuous(part: Part, edges: list[TangentEdge], tolerance: float) -> list[TangentEdge]:
-    """Those of the tangent ``edges`` along which the hot faces are curvature-continuous: their jump
-    (:func:`edge_jump`) is within ``tolerance``."""
-    hot = [face.surface for face in part.faces]
-    out = [edge for edge in edges if edge_jump(part, hot, edge) <= tolerance]
-    log.info("%d of %d tangent edges are curvature-continuous (jump within %.3g of their curvature)",
-             len(out), len(edges), tolerance)
-    return out
-
-
 def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
               n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[sparse.csr_array, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that give its
@@ -178,7 +168,8 @@ def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
         kappa, n, ab = cross_curvature(cold, uv, tangent)
         kappa_o, n_o, _ = cross_curvature(surfaces[other], uv_o, tangent)
         kappa_o = np.where(np.einsum("ij,ij->i", n, n_o) < 0, -kappa_o, kappa_o)
-        keep = np.isfinite(kappa) & np.isfinite(kappa_o) & np.isfinite(ab).all(axis=1)
+        keep = (np.isfinite(kappa) & np.isfinite(kappa_o) & np.isfinite(ab).all(axis=1)
+                & hot_defined(part, (k, other), uv, uv_o))
         if not keep.any():
             continue
         wanted_kappa = kappa_o if other in kept else 0.5 * (kappa + kappa_o)
