@@ -444,6 +444,21 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ..
     surfaces[face.index] = surface.with_poles(poles)
 
 
+def mean_spans(surface: BSplineSurface) -> list[float]:
+    """The mean knot span ``[h_u, h_v]`` of ``surface`` in each parameter direction."""
+    return [float(np.diff(knot_breaks(knots, p)).mean())
+            for knots, p in ((surface.u_knots, surface.u_degree), (surface.v_knots, surface.v_degree))]
+
+
+def edge_points(part: Part, edge: TangentEdge, k: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """``m`` equidistant points of a tangent ``edge`` (in its parameter) as ``(uv, uv_other)``, each (m, 2):
+    on face ``k`` and on the edge's other face."""
+    other = edge.faces[1 - edge.faces.index(k)]
+    use, use_o = _use_of(part.faces[k], edge.edge), _use_of(part.faces[other], edge.edge)
+    t = np.linspace(min(use.t[0], use.t[-1]), max(use.t[0], use.t[-1]), m)
+    return _uv_at(use, t), _uv_at(use_o, t)
+
+
 #: Weight of the rows of :func:`turn_rows` in a face's fit, against the FE nodes' (1 each; rows in mm).
 TURN_WEIGHT = 10.0
 
@@ -464,19 +479,14 @@ def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
     the fit itself, next to the face's nodes, the face turns where its nodes let it.  Returns the rows
     ``(r, nu * nv)`` (sparse) and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
     """
-    face = part.faces[k]
-    hot, cold = face.surface, surfaces[k]
-    spans = [np.diff(knot_breaks(knots, p)).mean() for knots, p in ((hot.u_knots, hot.u_degree),
-                                                                    (hot.v_knots, hot.v_degree))]
+    hot, cold = part.faces[k].surface, surfaces[k]
+    spans = mean_spans(hot)
     rows, targets = [], []
     for te in edges:
         if k not in te.faces or (te.sides[te.faces.index(k)] is not None and not sides):
             continue
         other = te.faces[1 - te.faces.index(k)]
-        use, use_o = _use_of(face, te.edge), _use_of(part.faces[other], te.edge)
-        t = np.linspace(min(use.t[0], use.t[-1]), max(use.t[0], use.t[-1]),
-                        max(n_points_factor * sum(hot.shape), 2))
-        uv, uv_o = _uv_at(use, t), _uv_at(use_o, t)
+        uv, uv_o = edge_points(part, te, k, max(n_points_factor * sum(hot.shape), 2))
         n = surface_normals(cold, uv[:, 0], uv[:, 1])
         n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
         keep = np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1)

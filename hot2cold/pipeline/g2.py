@@ -28,10 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from ..core.bspline import (BSplineSurface, evaluate_surface, knot_breaks, surface_derivatives, surface_jet,
+from ..core.bspline import (BSplineSurface, evaluate_surface, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
-from .g1 import TangentEdge, _matched_uv, _use_of, _uv_at, hot_defined
+from .g1 import TangentEdge, _matched_uv, _use_of, edge_points, hot_defined, mean_spans
 
 log = logging.getLogger(__name__)
 
@@ -151,19 +151,14 @@ def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
     in mm, so that the rows are lengths) against the pole displacements from the hot face.  Returns the rows
     ``(r, nu * nv)`` (sparse) and targets ``(r, 3)``.
     """
-    face = part.faces[k]
-    hot, cold = face.surface, surfaces[k]
-    spans = [np.diff(knot_breaks(knots, p)).mean() for knots, p in ((hot.u_knots, hot.u_degree),
-                                                                    (hot.v_knots, hot.v_degree))]
+    hot, cold = part.faces[k].surface, surfaces[k]
+    spans = mean_spans(hot)
     rows, targets = [], []
     for te in edges:
         if k not in te.faces:
             continue
         other = te.faces[1 - te.faces.index(k)]
-        use, use_o = _use_of(face, te.edge), _use_of(part.faces[other], te.edge)
-        t = np.linspace(min(use.t[0], use.t[-1]), max(use.t[0], use.t[-1]),
-                        max(n_points_factor * sum(hot.shape), 3))
-        uv, uv_o = _uv_at(use, t), _uv_at(use_o, t)
+        uv, uv_o = edge_points(part, te, k, max(n_points_factor * sum(hot.shape), 3))
         tangent = _edge_tangents(cold, uv)
         kappa, n, ab = cross_curvature(cold, uv, tangent)
         kappa_o, n_o, _ = cross_curvature(surfaces[other], uv_o, tangent)
