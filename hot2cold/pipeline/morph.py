@@ -358,8 +358,9 @@ class MorphContext:
 
     def correct_g2(self, face_morphs: list[FaceMorph], reports: list[G1Report], grids: list[FaceGrid],
                    edge_morphs: list[EdgeMorph]) -> tuple[list[FaceMorph], list[G1Report]]:
-        """The jump of the normal curvature across each tangent edge measured on the hot faces, on
-        ``face_morphs`` (after G1) and, with ``Settings.continuity`` G2, removed where the hot faces were
+        """The jump of the normal curvature across each tangent edge of ``reports`` (those G1 examined: the
+        morph kinked them) measured on the hot faces, on ``face_morphs`` (after G1) and, with
+        ``Settings.continuity`` G2, removed where the hot faces were
         curvature-continuous: both faces fitted again with rows that give them the common curvature across
         the edge and keep their tangents in the common plane (:func:`~hot2cold.pipeline.g2.bend_rows`,
         :func:`~hot2cold.pipeline.g1.turn_rows`), with bend rows stiffer in turn (``BEND_WEIGHTS``) while the
