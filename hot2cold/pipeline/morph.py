@@ -34,8 +34,9 @@ from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
 from ..io.field import DisplacementField, as_field
-from .g1 import (ALONG_CURVE, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners, correct_g1,
-                 edge_decided, kink_added, kink_bound, surface_corner_normals, tangent_edges, turn_rows, with_corners)
+from .g1 import (ALONG_CURVE, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners,
+                 correct_g1, edge_decided, kink_added, kink_bound, kink_misses, surface_corner_normals,
+                 tangent_edges, turn_rows, with_corners)
 from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
 from ..kernel.validity import check_solids
@@ -50,7 +51,7 @@ from ..core.footpoint import surface_distances
 from ..core.domain import Trim
 from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
-from .refine import TARGET_SHARE, Targets, edge_errors, noise_allowance, refine
+from .refine import TARGET_SHARE, Targets, edge_errors, noise_allowance, refine, refine_patches
 from .report import Checks, Fits, Report, build_report, node_errors
 from ..settings import Continuity, Settings
 
@@ -75,6 +76,8 @@ _TURN_SHARE = 0.1
 #: The largest kink (degrees) above its hot angle a correction may leave on a tangent edge that it finds less
 #: kinked (issue 15's promise): the second rows (G1) and a face bent to a common curvature (G2).
 _KINK_PROMISE_DEG = 0.01
+#: Rounds of refinement for G1 at the most (:func:`_g1`), each halving the patches along the edges still kinked.
+_G1_REFINEMENTS = 2
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
@@ -478,6 +481,17 @@ class MorphContext:
         return f"turning edge {e} would take it {now.max():.2g} mm off its nodes (tolerance {limit:g} mm, " \
                f"{was.max():.2g} before)"
 
+    def field_distance(self, k: int, surface: BSplineSurface, grid: FaceGrid) -> float:
+        """The largest distance (mm) from a morphed ``surface`` of face ``k`` to its nodes' cold targets
+        (eq. 21) and to the field's estimate over its ``grid`` (0 where it has neither)."""
+        nodes = self.classification.nodes_of(Role.FACE, k)
+        targets = np.concatenate([self.classification.foot[nodes] + self.field.displacements[nodes],
+                                  grid.expected])
+        uv = np.concatenate([self.classification.uv[nodes], grid.uv])
+        if not len(uv):
+            return 0.0
+        return float(surface_distances(surface, targets, uv, self.part.faces[k].uv_box, past_border=True).max())
+
     def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
                    share: float | None = None, verb: str = "turning", floor: float | None = None) -> str:
         """Why face ``k`` may not take the G1-corrected surface ``after`` in place of ``before`` (its fit): its
@@ -491,15 +505,7 @@ class MorphContext:
         limit = self.settings.tolerance
         if limit is None:
             return ""
-        nodes = self.classification.nodes_of(Role.FACE, k)
-        box = self.part.faces[k].uv_box
-        targets = np.concatenate([self.classification.foot[nodes] + self.field.displacements[nodes],
-                                  grid.expected])
-        uv = np.concatenate([self.classification.uv[nodes], grid.uv])
-        if not len(uv):
-            return ""
-        was = float(surface_distances(before, targets, uv, box, past_border=True).max())
-        now = float(surface_distances(after, targets, uv, box, past_border=True).max())
+        was, now = self.field_distance(k, before, grid), self.field_distance(k, after, grid)
         allowed = max(limit, was) if share is None else \
             max((1.0 + share) * was, (share if floor is None else floor) * limit)
         if now <= allowed:
@@ -565,6 +571,86 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
 #: Scatter below this share of the tolerance is not smoothed: it cannot carry a fit out of the tolerance, and
 #: smoothing towards the field's estimate is not free (a second fit per face).
 _SMOOTH_SHARE = 0.01
+
+
+def _over_promise(report: G1Report) -> float:
+    """How far (degrees) a tangent edge's kink after G1 lies above its hot angle plus the promised 0.01."""
+    return float(np.nan_to_num(max(report.kink_after_max - report.hot_angle_max - _KINK_PROMISE_DEG, 0.0)))
+
+
+def _refined_off(context: MorphContext, before: list[FaceMorph], after: list[FaceMorph], grids: list[FaceGrid]
+                 ) -> dict[int, str]:
+    """The faces (index -> why) that a refinement for G1 takes too far from the field (nodes and ``grids``,
+    :meth:`MorphContext.field_distance`): beyond 10 % above the largest distance of the faces it changes
+    (so the part's Δmax grows by 10 % at the most, as G1 may) and beyond 10 % of the tolerance, or beyond the
+    tolerance where the face was within it."""
+    limit = context.settings.tolerance
+    changed = [k for k, (a, b) in enumerate(zip(before, after)) if a.surface is not b.surface]
+    if limit is None or not changed:
+        return {}
+    was = {k: context.field_distance(k, before[k].surface, grids[k]) for k in changed}
+    allowed = max((1.0 + _TURN_SHARE) * max(was.values()), _TURN_SHARE * limit)
+    off = {}
+    for k in changed:
+        now = context.field_distance(k, after[k].surface, grids[k])
+        if now > allowed or now > limit >= was[k]:
+            off[k] = (f"refining would take face {k} {now:.2g} mm off the field ({was[k]:.2g} before, "
+                      f"{min(allowed, max(limit, was[k])):.2g} allowed)")
+    return off
+
+
+def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph],
+        corners: list[CornerReport], grids: list[FaceGrid], shortest: np.ndarray | None, regrid
+        ) -> tuple[MorphContext, list[FaceGrid], list[EdgeMorph], list[FaceMorph], list[G1Report]]:
+    """G1 on the fits ``edge_morphs``, ``face_morphs``: the corners of tangent edges anchored on trimmed
+    faces, then the kinks along the edges removed (:meth:`MorphContext.correct_g1`).
+
+    Where an edge stays more than 0.01 deg above its hot angle and ``shortest`` ((n_faces,) mm, the
+    refinement's shortest half span per face) is given, the knot-span patches of its faces that hold the
+    kinked points are halved (:func:`~hot2cold.pipeline.refine.refine_patches`; a face's net may have too few
+    poles next to the edge: NIST FTC-08's 3x3 patches have one free pole in a second row), everything fitted
+    and corrected again, and the refined part taken if it leaves less kink above 0.01 deg in all and takes
+    no face farther from the field than G1 may (:meth:`MorphContext._moved_off`); up to
+    :data:`_G1_REFINEMENTS` rounds.  ``regrid(part, faces)`` gives the grids of refined faces.  Returns the
+    context (its part refined where taken), the grids, the edge and face morphs and one report per tangent
+    edge."""
+    def corrected(ctx: MorphContext, edges: list[EdgeMorph], faces: list[FaceMorph], grids: list[FaceGrid]):
+        edges, faces, more = ctx.anchor_corners(edges, faces)
+        faces, reports = ctx.correct_g1(faces, corners + more, grids, edges)
+        return edges, faces, reports
+
+    best = (context, grids, *corrected(context, edge_morphs, face_morphs, grids))
+    refined: set[int] = set()
+    for _ in range(_G1_REFINEMENTS if shortest is not None else 0):
+        ctx, grids_now, _, faces_now, reports = best
+        over = {r.edge for r in reports if _over_promise(r) > 0}
+        misses = kink_misses(ctx.part, [f.surface for f in faces_now], [te for te in ctx.tangent if te.edge in over],
+                             _KINK_PROMISE_DEG)
+        if not misses:
+            break
+        patch = refine_patches(ctx.part, face_morphs, edge_morphs, misses, shortest, ctx.fit_face,
+                               ctx.refit_edges, regrid)
+        if patch is None:
+            log.info("G1: %d edges above %g deg; no patch of their faces may be halved", len(over),
+                     _KINK_PROMISE_DEG)
+            break
+        trial_ctx = replace(ctx, part=patch.part)
+        trial_grids = [patch.grids.get(k, g) for k, g in enumerate(grids_now)]
+        trial = corrected(trial_ctx, patch.edges, patch.faces, trial_grids)
+        before, after = (sum(map(_over_promise, r)) for r in (reports, trial[2]))
+        off = _refined_off(trial_ctx, faces_now, trial[1], trial_grids)
+        log.info("G1: faces %s refined along %d edges above %g deg: %.3g -> %.3g deg above it in all%s",
+                 sorted(patch.knots_added), len(over), _KINK_PROMISE_DEG, before, after,
+                 f"; not taken: {'; '.join(off.values())}" if off else "")
+        if off or after >= before:
+            break
+        best = (trial_ctx, trial_grids, *trial)
+        face_morphs, edge_morphs = patch.faces, patch.edges
+        refined |= set(patch.knots_added)
+    ctx, grids, edges, faces, reports = best
+    reports = [replace(r, method=f"{r.method}; {REFINED}") if r.method and refined & set(r.faces) else r
+               for r in reports]
+    return ctx, grids, edges, faces, reports
 
 
 def smoothing_noise(scatter: float, settings: Settings) -> float:
@@ -653,25 +739,31 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
                              scale.strain) if element_points_added else None)
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours,
                        elements=elements)
+    def regrid(part: Part, faces: list[int]) -> list[FaceGrid]:
+        return face_grids(part, projector, cls, field, context.estimator, settings.vertex_neighbours, faces,
+                          elements)
+
     refinements, edge_refinements = (), ()
+    refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
     if settings.tolerance is not None and not settings.keep_knots:
         targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, grids,
                              edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
-                         context.fit_face, context.refit_edges,
-                         lambda part, faces: face_grids(part, projector, cls, field, context.estimator,
-                                                        settings.vertex_neighbours, faces, elements))
+                         context.fit_face, context.refit_edges, regrid)
         context = replace(context, part=refined.part)
         grids = [refined.grids.get(k, grid) for k, grid in enumerate(grids)]
         face_morphs, edge_morphs = refined.faces, refined.edges
         refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
+        refined_spans = targets.min_span_spacings
         stages.lap("refine")
 
-    # G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges
+    # G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges; faces
+    # refined along the edges their nets cannot bring to 0.01 deg (beyond the paper; with the refinement)
     g1_reports = ()
     if context.tangent:
-        edge_morphs, face_morphs, more = context.anchor_corners(edge_morphs, face_morphs)
-        face_morphs, g1_reports = context.correct_g1(face_morphs, corners + more, grids, edge_morphs)
+        shortest = refined_spans * targets.face_spacing if refined_spans else None
+        context, grids, edge_morphs, face_morphs, g1_reports = _g1(context, edge_morphs, face_morphs, corners,
+                                                                   grids, shortest, regrid)
         stages.lap("g1")
         # G2 (the paper's outlook): the curvature jumps across them measured, and removed if asked
         face_morphs, g1_reports = context.correct_g2(face_morphs, g1_reports, grids, edge_morphs)

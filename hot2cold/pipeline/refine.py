@@ -500,13 +500,108 @@ def _dedupe(s: np.ndarray, tol: float = 1e-12) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------------------
-# The refinement loop.
+# Knot insertion by parameter classes, and the fits again.
 # ----------------------------------------------------------------------------------------------------------
 
 FitFace = Callable[[Part, Face, list[EdgeMorph]], FaceMorph]
 FitEdges = Callable[[Part, list[EdgeMorph], set[int]], list[EdgeMorph]]
 Regrid = Callable[[Part, list[int]], list[FaceGrid]]
 
+
+def _mark(part: Part, classes: _Classes, k: int, wanted: list[tuple[np.ndarray, bool]], marks: dict,
+          elevate: set) -> bool:
+    """Face ``k``'s ``wanted`` refinement (:func:`_face_marks`) added to ``marks`` (class root -> list of
+    normalised knots to insert) and ``elevate`` (class roots to raise to :data:`REFINED_DEGREE`); whether it
+    asks for anything."""
+    for axis, (mids, up) in enumerate(wanted):
+        member = Member.face(k, axis)
+        knots, _ = _knots_degree(part, member)
+        root, flip = classes.find(member)
+        marks.setdefault(root, []).append(_to_class(mids, knots, flip))
+        if up:
+            elevate.add(root)
+    return any(len(mids) or up for mids, up in wanted)
+
+
+@dataclass(eq=False)
+class _Inserted:
+    """A part with knots inserted: the refined part, the faces and edges whose geometry record changed, and
+    the knots added to each (``face_added`` (n_faces, 2) per direction, ``edge_added`` (n_edges,))."""
+
+    part: Part
+    faces: set[int]
+    edges: set[int]
+    face_added: np.ndarray
+    edge_added: np.ndarray
+
+
+def _insert(part: Part, classes: _Classes, marks: dict, elevate: set) -> _Inserted:
+    """The knots ``marks`` (class root -> list of arrays of normalised parameters) inserted into every member
+    of their class, each member raised to :data:`REFINED_DEGREE` first where its root is in ``elevate``."""
+    groups = classes.members()
+    new_faces, new_edges = list(part.faces), list(part.edges)
+    face_added = np.zeros((len(part.faces), 2), int)
+    edge_added = np.zeros(len(part.edges), int)
+    changed_faces, changed_edges = set(), set()
+    for root, pieces in marks.items():
+        s = np.concatenate(pieces) if pieces else np.zeros(0)
+        if root in classes.symmetric:
+            s = np.concatenate([s, 1.0 - s])
+        s = _dedupe(s)
+        for member, flip in groups[root]:
+            knots, degree = _knots_degree(part, member)
+            inserted = _from_class(s, knots, flip)
+            lo, hi = knots[degree], knots[len(knots) - degree - 1]
+            inserted = inserted[(inserted > lo) & (inserted < hi)]
+            target = max(degree, REFINED_DEGREE) if root in elevate else degree
+            if member.kind is Kind.EDGE:
+                e = member.index
+                new_edges[e] = replace(new_edges[e], curve=refine_curve(new_edges[e].curve, inserted, target))
+                if new_edges[e].curve is not part.edges[e].curve:
+                    changed_edges.add(e)
+                    edge_added[e] += len(inserted)
+            else:
+                k, axis = member.index, member.axis
+                surface = refine_surface(new_faces[k].surface, axis, inserted, target)
+                if surface is not new_faces[k].surface:
+                    new_faces[k] = replace(new_faces[k], surface=surface)
+                    changed_faces.add(k)
+                    face_added[k, axis] += len(inserted)
+    if changed_faces or changed_edges:
+        part = replace(part, faces=new_faces, edges=new_edges)
+    return _Inserted(part, changed_faces, changed_edges, face_added, edge_added)
+
+
+@dataclass(eq=False)
+class _Refitted:
+    """The morphs after a knot insertion: every face's and edge's, the grids of the refined faces (index ->
+    :class:`FaceGrid`), the faces fitted again (``refit``) and the edges whose morph changed (``moved``)."""
+
+    faces: list[FaceMorph]
+    edges: list[EdgeMorph]
+    grids: dict[int, FaceGrid]
+    refit: set[int]
+    moved: set[int]
+
+
+def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph], fit_face: FitFace,
+           fit_edges: FitEdges, regrid: Regrid) -> _Refitted:
+    """The refined edges fitted again, then the refined faces and every face on an edge that moved."""
+    part = inserted.part
+    changed = sorted(inserted.faces)
+    grids = dict(zip(changed, regrid(part, changed))) if changed else {}
+    fitted = fit_edges(part, edge_morphs, inserted.edges)
+    moved = inserted.edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
+    refit = set(inserted.faces) | {k for k, f in enumerate(part.faces) for use in f.uses if use.edge in moved}
+    faces = list(face_morphs)
+    for k in sorted(refit):
+        faces[k] = fit_face(part, part.faces[k], fitted)
+    return _Refitted(faces, list(fitted), grids, refit, moved)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The refinement loop.
+# ----------------------------------------------------------------------------------------------------------
 
 def refine(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
            edge_morphs: list[EdgeMorph], targets: Targets, max_rounds: int, fit_face: FitFace,
@@ -561,15 +656,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             err = face_err[k]
             wanted = _face_marks(part.faces[k].surface, err.uv, err.error > limit,
                                  targets.min_span_spacings * targets.face_spacing[k])
-            if not any(len(m) or up for m, up in wanted):
+            if not _mark(part, classes, k, wanted, marks, elevate):
                 unplaced_faces.add(k)
-            for axis, (mids, up) in enumerate(wanted):
-                member = Member.face(k, axis)
-                knots, _ = _knots_degree(part, member)
-                root, flip = classes.find(member)
-                marks.setdefault(root, []).append(_to_class(mids, knots, flip))
-                if up:
-                    elevate.add(root)
         for e in bad_edges:
             t, err = edge_err[e].t, edge_err[e].error
             mids, up = _edge_marks(part.edges[e].curve, t, err > limit,
@@ -582,55 +670,27 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             marks.setdefault(root, []).append(_to_class(mids, knots, flip))
             if up:
                 elevate.add(root)
-        groups = classes.members()
-        new_faces, new_edges = list(part.faces), list(part.edges)
-        changed_faces, changed_edges = set(), set()
-        for root, pieces in marks.items():
-            s = np.concatenate(pieces)
-            if root in classes.symmetric:
-                s = np.concatenate([s, 1.0 - s])
-            s = _dedupe(s)
-            for member, flip in groups[root]:
-                knots, degree = _knots_degree(part, member)
-                inserted = _from_class(s, knots, flip)
-                lo, hi = knots[degree], knots[len(knots) - degree - 1]
-                inserted = inserted[(inserted > lo) & (inserted < hi)]
-                target = max(degree, REFINED_DEGREE) if root in elevate else degree
-                if member.kind is Kind.EDGE:
-                    e = member.index
-                    new_edges[e] = replace(new_edges[e], curve=refine_curve(new_edges[e].curve, inserted, target))
-                    if new_edges[e].curve is not part.edges[e].curve:
-                        changed_edges.add(e)
-                        edge_added[e] += len(inserted)
-                else:
-                    k, axis = member.index, member.axis
-                    surface = refine_surface(new_faces[k].surface, axis, inserted, target)
-                    if surface is not new_faces[k].surface:
-                        new_faces[k] = replace(new_faces[k], surface=surface)
-                        changed_faces.add(k)
-                        face_added[k, axis] += len(inserted)
+        inserted = _insert(part, classes, marks, elevate)
         stuck_faces, stuck_edges = unplaced_faces, unplaced_edges
-        if not changed_faces and not changed_edges:
+        if not inserted.faces and not inserted.edges:
             break
-        part = replace(part, faces=new_faces, edges=new_edges)
-        if changed_faces:
-            grids.update(zip(sorted(changed_faces), regrid(part, sorted(changed_faces))))
-            targets = targets.with_grids({k: grids[k] for k in changed_faces})
-        fitted = fit_edges(part, edge_morphs, changed_edges)
-        moved = changed_edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
-        edge_morphs = list(fitted)
-        edge_rounds[list(changed_edges)] += 1
-        refit = set(changed_faces) | {k for k, f in enumerate(part.faces) for use in f.uses if use.edge in moved}
-        for k in sorted(refit):
-            face_morphs[k] = fit_face(part, part.faces[k], edge_morphs)
-            face_rounds[k] += k in changed_faces
+        part = inserted.part
+        face_added += inserted.face_added
+        edge_added += inserted.edge_added
+        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid)
+        grids.update(refitted.grids)
+        targets = targets.with_grids(refitted.grids)
+        face_morphs, edge_morphs = refitted.faces, refitted.edges
+        edge_rounds[list(inserted.edges)] += 1
+        face_rounds[list(inserted.faces)] += 1
+        refit, moved = refitted.refit, refitted.moved
         rounds += 1
         for k in refit:                 # the others' errors stand: a face's depend on it and its edges only
             face_err[k] = face_errors(k)
         for e in moved:
             edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
         log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", rounds,
-                 len(changed_faces), len(changed_edges),
+                 len(inserted.faces), len(inserted.edges),
                  max([worst(e.error) for e in face_err] + [worst(e.error) for e in edge_err] + [0.0]))
 
     face_reports = []
@@ -657,3 +717,38 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e][0], edge_err[e].nodes,
             edge_before[e][1], edge_err[e].between))
     return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds, grids)
+
+
+@dataclass(eq=False)
+class PatchRefinement:
+    """What :func:`refine_patches` made: the refined part, every face's and edge's morph, the grids of the
+    refined faces (index -> :class:`FaceGrid`), and the knots added per refined face (index -> (u, v))."""
+
+    part: Part
+    faces: list[FaceMorph]
+    edges: list[EdgeMorph]
+    grids: dict[int, FaceGrid]
+    knots_added: dict[int, tuple[int, int]]
+
+
+def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph],
+                   points: dict[int, np.ndarray], shortest: np.ndarray, fit_face: FitFace, fit_edges: FitEdges,
+                   regrid: Regrid) -> PatchRefinement | None:
+    """The knot-span patches of each face ``k`` that hold one of ``points[k]`` ((m, 2) parameters) halved as
+    :func:`refine` halves a patch that misses the tolerance (longest-edge bisection, halves at least
+    ``shortest[k]`` mm long, a direction below :data:`REFINED_DEGREE` raised to it), in their parameter
+    classes so that shared edges stay shared, and the morphs fitted again (``fit_face``, ``fit_edges``,
+    ``regrid`` as for :func:`refine`).  None where no such patch may be halved."""
+    classes = _classes(part, face_morphs)
+    marks: dict = {}
+    elevate: set = set()
+    for k, uv in points.items():
+        if len(uv):
+            _mark(part, classes, k, _face_marks(part.faces[k].surface, uv, np.ones(len(uv), bool), shortest[k]),
+                  marks, elevate)
+    inserted = _insert(part, classes, marks, elevate)
+    if not inserted.faces and not inserted.edges:
+        return None
+    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid)
+    return PatchRefinement(inserted.part, refitted.faces, refitted.edges, refitted.grids,
+                           {k: tuple(int(n) for n in inserted.face_added[k]) for k in sorted(inserted.faces)})
