@@ -569,3 +569,51 @@ def test_a_face_out_of_its_nodes_reach_is_named_not_measured(tmp_path, capsys):
     covered = morph(shape, (fe, bend(fe)))
     assert covered.report.unsupported_faces() == []
     assert all(f.unsupported == 0.0 for f in covered.report.faces)
+
+
+def test_refine_patches_halves_the_patches_at_the_points_in_their_classes():
+    """G1's refinement (:func:`refine_patches`): the patches of face 1 that hold the points are halved, and
+    face 0's direction along the shared edge with it (one parameter class through the edge), so the edge
+    stays shared pole for pole; the hot shape is kept; a face that may not be halved further gives None."""
+    from hot2cold.pipeline.face_fit import FaceMorph
+    from hot2cold.pipeline.edge_fit import EdgeMorph
+    from hot2cold.pipeline.refine import refine_patches
+    from test_g1 import _part, _patches
+
+    sa, sb = _patches()
+    part = _part(sa, sb)
+    tied = ("u0", "u1", "v0", "v1")
+    faces = [FaceMorph(k, f.surface, 0, 0, 0, tied, 0, 0, 1.0) for k, f in enumerate(part.faces)]
+    edges = [EdgeMorph(0, part.edges[0].curve, 0, 0, 0, 0, 1.0)]
+    calls = {"faces": [], "edges": [], "grids": []}
+
+    def fit_face(p, face, edge_morphs):
+        calls["faces"].append(face.index)
+        return FaceMorph(face.index, face.surface, 0, 0, 0, tied, 0, 0, 1.0)
+
+    def fit_edges(p, edge_morphs, refined):
+        calls["edges"].append(set(refined))
+        return [EdgeMorph(e.index, p.edges[e.index].curve, 0, 0, 0, 0, 1.0) for e in edge_morphs]
+
+    def regrid(p, ks):
+        calls["grids"].append(list(ks))
+        return [f"grid {k}" for k in ks]
+
+    points = {1: np.array([[0.1, 0.2], [0.1, 0.3]])}      # both in face 1's patch u [0, 0.5] x v [0, 1/3]
+    out = refine_patches(part, faces, edges, points, np.zeros(2), fit_face, fit_edges, regrid)
+    b = out.part.faces[1].surface
+    assert out.knots_added[1] == (1, 1)
+    assert np.allclose(b.u_knots, [0, 0, 0, 0, 0.25, 0.5, 1, 1, 1, 1])
+    assert np.allclose(b.v_knots, [0, 0, 0, 0, 1 / 6, 1 / 3, 2 / 3, 1, 1, 1, 1])
+    a, edge = out.part.faces[0].surface, out.part.edges[0].curve
+    assert out.knots_added[0] == (0, 1) and np.allclose(a.v_knots, b.v_knots) and np.allclose(a.u_knots, sa.u_knots)
+    assert np.allclose(edge.knots, b.v_knots)
+    assert np.abs(a.poles[-1] - edge.poles).max() <= 1e-12 and np.abs(b.poles[0] - edge.poles).max() <= 1e-12
+    uv = RNG.uniform(0, 1, (200, 2))
+    for before, after in ((sa, a), (sb, b)):
+        assert np.abs(evaluate_surface(after, uv[:, 0], uv[:, 1])
+                      - evaluate_surface(before, uv[:, 0], uv[:, 1])).max() <= 1e-12
+    assert calls == {"faces": [0, 1], "edges": [{0}], "grids": [[0, 1]]}
+    assert out.grids == {0: "grid 0", 1: "grid 1"}
+    # halves shorter than the shortest span allowed: nothing to do
+    assert refine_patches(part, faces, edges, points, np.full(2, 1e3), fit_face, fit_edges, regrid) is None
