@@ -465,14 +465,16 @@ def edge_points(part: Part, edge: TangentEdge, k: int, m: int) -> tuple[np.ndarr
 def kink_misses(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], limit_deg: float,
                 n_points_factor: int = 2) -> dict[int, np.ndarray]:
     """Where the morphed ``surfaces`` kink a tangent edge of ``edges`` more than ``limit_deg`` beyond the hot
-    faces: per face, the parameters ``(m, 2)`` of those edge points (``n_points_factor * (nu + nv)`` points
-    per edge, ``nu x nv`` the larger face's net); faces without such points are left out."""
+    faces: per face, the parameters ``(m, 2)`` of those edge points (the edge's own samples, where the
+    report measures it, and ``n_points_factor * (nu + nv)`` equidistant points, ``nu x nv`` the larger
+    face's net); faces without such points are left out."""
     hot = [face.surface for face in part.faces]
     found: dict[int, list[np.ndarray]] = {}
     for te in edges:
         fa, fb = te.faces
         m = max(n_points_factor * max(sum(hot[fa].shape), sum(hot[fb].shape)), 2)
-        uv_a, uv_b = edge_points(part, te, fa, m)
+        own = _matched_uv(_use_of(part.faces[fa], te.edge), _use_of(part.faces[fb], te.edge))
+        uv_a, uv_b = (np.concatenate(pair) for pair in zip(own, edge_points(part, te, fa, m)))
         added = kink_angles(surfaces[fa], uv_a, surfaces[fb], uv_b) - kink_angles(hot[fa], uv_a, hot[fb], uv_b)
         bad = np.isfinite(added) & (added > limit_deg)
         if bad.any():
