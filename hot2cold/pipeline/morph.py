@@ -51,7 +51,7 @@ from ..core.footpoint import surface_distances
 from ..core.domain import Trim
 from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
-from .refine import TARGET_SHARE, Targets, edge_errors, noise_allowance, refine, refine_patches
+from .refine import TARGET_SHARE, Regrid, Targets, edge_errors, noise_allowance, refine, refine_patches
 from .report import Checks, Fits, Report, build_report, node_errors
 from ..settings import Continuity, Settings
 
@@ -600,7 +600,7 @@ def _refined_off(context: MorphContext, before: list[FaceMorph], after: list[Fac
 
 
 def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph],
-        corners: list[CornerReport], grids: list[FaceGrid], shortest: np.ndarray | None, regrid
+        corners: list[CornerReport], grids: list[FaceGrid], shortest: np.ndarray | None, regrid: Regrid
         ) -> tuple[MorphContext, list[FaceGrid], list[EdgeMorph], list[FaceMorph], list[G1Report]]:
     """G1 on the fits ``edge_morphs``, ``face_morphs``: the corners of tangent edges anchored on trimmed
     faces, then the kinks along the edges removed (:meth:`MorphContext.correct_g1`).
@@ -610,7 +610,7 @@ def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[F
     kinked points are halved (:func:`~hot2cold.pipeline.refine.refine_patches`; a face's net may have too few
     poles next to the edge: NIST FTC-08's 3x3 patches have one free pole in a second row), everything fitted
     and corrected again, and the refined part taken if it leaves less kink above 0.01 deg in all and takes
-    no face farther from the field than G1 may (:meth:`MorphContext._moved_off`); up to
+    no face farther from the field than G1 may (:func:`_refined_off`); up to
     :data:`_G1_REFINEMENTS` rounds.  ``regrid(part, faces)`` gives the grids of refined faces.  Returns the
     context (its part refined where taken), the grids, the edge and face morphs and one report per tangent
     edge."""
@@ -739,9 +739,11 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
                              scale.strain) if element_points_added else None)
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours,
                        elements=elements)
+    estimator = context.estimator
+
     def regrid(part: Part, faces: list[int]) -> list[FaceGrid]:
-        return face_grids(part, projector, cls, field, context.estimator, settings.vertex_neighbours, faces,
-                          elements)
+        """The grids of ``faces`` of a refined ``part`` (the refinement's and G1's)."""
+        return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements)
 
     refinements, edge_refinements = (), ()
     refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
