@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_surface
-from hot2cold.pipeline.g1 import (NOT_ISO_SIDE, REFINED, TangentEdge, correct_g1, edge_kinks, kink_added, kink_angles,
-                                 kink_misses, tangent_edges)
+from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_surface, normal_rounding
+from hot2cold.pipeline.g1 import (MEASURABLE_DEG, NOT_ISO_SIDE, REFINED, TangentEdge, correct_g1, edge_kinks,
+                                 kink_added, kink_angles, kink_misses, tangent_edges)
 from hot2cold.core.model import Edge, EdgeUse, Face, Part
 
 CUBIC5 = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])              # 5 poles, degree 3
@@ -510,6 +510,39 @@ def test_a_collapsed_side_is_left_out_of_the_kinks():
     kinks = edge_kinks(part, cold, te)
     assert np.isnan(kinks[0]) and np.allclose(kinks[1:], raw[1:])
     assert kink_added(part, cold, te) < 1e-6
+
+
+def test_a_side_collapsed_all_but_to_rounding_is_left_out_of_the_kinks():
+    """A STEP writer's sliver face: its side v0 shrunk to 1e-9 of its length, not to a point.  The hot normal
+    there is defined, but rests on pole differences that a fit's noise (1e-11 mm here) turns by degrees; the vise of the
+    real corpus read 0.61 deg at such a corner.  ``normal_rounding`` says so, and the measures leave the points
+    out where rounding may turn a hot normal by more than MEASURABLE_DEG, and only those."""
+    sa, sb = _patches()
+    pa, pb = sa.poles.copy(), sb.poles.copy()
+    end = pa[-1, 0].copy()
+    pa[:, 0] = end + 1e-9 * (pa[:, 0] - end)           # side v0 of both faces shrinks to 1e-9 of its length
+    pb[:, 0] = end + 1e-9 * (pb[:, 0] - end)
+    sa, sb = sa.with_poles(pa), sb.with_poles(pb)
+    part = _part(sa, sb)
+    (te,) = tangent_edges(part)
+    ua, ub = part.faces[0].uses[0], part.faces[1].uses[0]
+    assert np.isfinite(kink_angles(sa, ua.uv, sb, ub.uv)).all()          # defined: not collapsed to rounding
+    rounding = np.degrees(normal_rounding(sa, ua.uv[:, 0], ua.uv[:, 1]))
+    assert rounding[0] > 100 * MEASURABLE_DEG and rounding[1:].max() < 1e-3 * MEASURABLE_DEG
+    rng = np.random.default_rng(0)
+    noisy_a, noisy_b = pa.copy(), pb.copy()
+    noisy_a[:-1, 0] += 1e-11 * rng.normal(size=(pa.shape[0] - 1, 3))
+    noisy_b[1:, 0] += 1e-11 * rng.normal(size=(pb.shape[0] - 1, 3))
+    cold = [sa.with_poles(noisy_a), sb.with_poles(noisy_b)]
+    raw = kink_angles(cold[0], ua.uv, cold[1], ub.uv)
+    assert raw[0] > 0.1 and np.nanmax(raw[1:]) < 1e-6          # the noise at v = 0, nothing elsewhere
+    kinks = edge_kinks(part, cold, te)
+    assert np.isnan(kinks[0]) and np.allclose(kinks[1:], raw[1:])
+    assert kink_added(part, cold, te) < 1e-6
+    # the untouched patches: every point measured
+    plain = _part(*_patches())
+    (te_plain,) = tangent_edges(plain)
+    assert np.isfinite(edge_kinks(plain, [f.surface for f in plain.faces], te_plain)).all()
 
 
 def test_kink_misses_are_the_edge_points_kinked_beyond_the_limit_on_both_faces():
