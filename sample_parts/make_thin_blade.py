@@ -23,18 +23,13 @@ from pathlib import Path
 
 import numpy as np
 from OCP.BRep import BRep_Tool
-from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
 from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
-from OCP.GeomAPI import GeomAPI_Interpolate
-from OCP.gp import gp_Pnt
 from OCP.Message import Message, Message_Gravity
-from OCP.TColgp import TColgp_HArray1OfPnt
-from OCP.TColStd import TColStd_HArray1OfReal
 from OCP.TopoDS import TopoDS, TopoDS_Solid
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from make_samples import airfoil, check_solid, read_step, write_step  # noqa: E402
+from make_samples import check_solid, read_step, section_curve, split_wire, write_step  # noqa: E402
 
 from hot2cold.kernel.sampling import face_list  # noqa: E402
 
@@ -50,27 +45,8 @@ def section(z: float):
     chord = 40.0 - 4.0 * z / SPAN
     twist = math.radians(-15.0 + 30.0 * z / SPAN)
     theta = -math.pi / 2 + 2.0 * math.pi * np.arange(N_SECTION_POINTS) / N_SECTION_POINTS
-    xy = airfoil(theta, chord, thickness=THICKNESS, skew=SKEW)
-    xy -= [0.4 * chord, 4.0 * 0.05 * 0.4 * 0.6 * chord]   # stacking line: the camber line at 40 % chord
-    rot = np.array([[math.cos(twist), -math.sin(twist)], [math.sin(twist), math.cos(twist)]])
-    xy = xy @ rot.T
-    pts = TColgp_HArray1OfPnt(1, N_SECTION_POINTS)
-    par = TColStd_HArray1OfReal(1, N_SECTION_POINTS + 1)
-    for i, ((x, y), t) in enumerate(zip(xy, theta), start=1):
-        pts.SetValue(i, gp_Pnt(float(x), float(y), z))
-        par.SetValue(i, float(t))
-    par.SetValue(N_SECTION_POINTS + 1, float(theta[0] + 2.0 * math.pi))
-    interp = GeomAPI_Interpolate(pts, par, True, 1e-9)
-    interp.Perform()
-    curve = interp.Curve()
-    curve.SetNotPeriodic()
-    cuts = [-math.pi / 2, math.pi / 2, 3 * math.pi / 2]
-    wire = BRepBuilderAPI_MakeWire()
-    for t0, t1 in zip(cuts[:-1], cuts[1:]):
-        piece = curve.Copy()
-        piece.Segment(t0, t1)
-        wire.Add(BRepBuilderAPI_MakeEdge(piece).Edge())
-    return wire.Wire()
+    curve = section_curve(z, chord, twist, theta, thickness=THICKNESS, skew=SKEW)
+    return split_wire(curve, [-math.pi / 2, math.pi / 2, 3 * math.pi / 2])
 
 
 def make_thin_blade() -> TopoDS_Solid:
