@@ -116,3 +116,20 @@ def test_each_span_has_its_own_density():
     assert step[u[:-1] < 2].max() <= 0.05                       # at most the radius
     assert 0.5 <= step[u[:-1] >= 2].min() and step[u[:-1] >= 2].max() <= 1.0     # the spacing, not denser
     assert 11 <= len(v) <= 15                 # 10 mm in 4 pieces of 2.5 mm, 3 steps each
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_bend_parameters_blockwise_as_at_once(monkeypatch, rational):
+    """The jet evaluated a few v lines at a time gives the parameters of the whole grid at once."""
+    import hot2cold.core.bspline as bspline
+
+    surface = _surface(np.random.default_rng(5 + rational), rational)
+    box = (-1.0, 2.5, 0.7, 3.9)
+    whole = bend_parameters(surface, box, 0.5)
+    assert whole[0][0] == -1.0 and whole[0][-1] == 2.5 and whole[1][0] == 0.7 and whole[1][-1] == 3.9
+    calls = []
+    monkeypatch.setattr(bspline, "grid_jet", lambda *args: calls.append(1) or grid_jet(*args))
+    monkeypatch.setattr(bspline, "BEND_BLOCK", 100)                # a v piece or two at a time
+    for a, b in zip(bend_parameters(surface, box, 0.5), whole):
+        np.testing.assert_array_equal(a, b)
+    assert len(calls) > 10

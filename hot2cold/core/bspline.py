@@ -723,6 +723,23 @@ def normal_turn(s_u: np.ndarray, s_v: np.ndarray, s_uu: np.ndarray, s_uv: np.nda
     return rates[0], rates[1]
 
 
+#: Most points of the jet :func:`bend_parameters` evaluates at once (a block of v lines at a time): 2^18 points
+#: of 6 derivatives, about 40 MB, however many knot spans the surface has.
+BEND_BLOCK = 1 << 18
+
+
+def _piece_steps(s: np.ndarray, rate: np.ndarray, normal: np.ndarray, spacing: float) -> np.ndarray:
+    """Steps each piece wants along the first axis of ``s (k + 1, l, 3)`` (points at the pieces' ends, on l
+    lines across), with the turn ``rate (k + 1, l)`` of the normal along that axis and the unit normals
+    ``normal (k + 1, l, 3)``: ``L max(1 / spacing, bend)`` (not rounded), the largest over the l lines, (k,)."""
+    chord = np.linalg.norm(np.diff(s, axis=0), axis=2)                                   # (k, l)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        angle = 2.0 * np.arcsin(np.minimum(np.linalg.norm(np.diff(normal, axis=0), axis=2) / 2.0, 1.0))
+        bend = np.fmax(np.fmax(rate[:-1], rate[1:]), angle / chord)
+        need = chord * np.maximum(1.0 / spacing, np.nan_to_num(bend, nan=0.0, posinf=0.0))
+    return np.nan_to_num(np.nanmax(need, axis=1, initial=0.0), nan=0.0)
+
+
 def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 2000
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Parameters ``u (m_u,)`` and ``v (m_v,)`` of a tensor grid over ``box = (u0, u1, v0, v1)`` (within the
@@ -732,12 +749,12 @@ def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 20
 
     Each direction is cut at its knots inside the box, every knot span into ``degree + 1`` equal cells
     (:func:`span_cells`) and every cell in two halves, the pieces.  On the grid of the pieces' ends in both
-    directions (:func:`grid_jet`), piece j of u gets ``ceil(L_j max(1 / spacing, k_j))`` equal parameter
-    steps, with ``L_j`` its longest chord (mm) and ``k_j`` the fastest turn of the normal along u at its ends
-    (:func:`normal_turn`) or between them (the angle between the end normals over ``L_j``), over all of v; v
-    likewise.  So a 0.05 mm leading edge makes the few pieces round it dense in the direction across it, and
-    nothing else.  Each direction has at most about ``most`` steps (more are spread thinner in proportion).
-    Both ends of the box are among the parameters.
+    directions (:func:`grid_jet`, :data:`BEND_BLOCK` points at a time), piece j of u gets ``ceil(L_j max(1 /
+    spacing, k_j))`` equal parameter steps, with ``L_j`` its longest chord (mm) and ``k_j`` the fastest turn
+    of the normal along u at its ends (:func:`normal_turn`) or between them (the angle between the end
+    normals over ``L_j``), over all of v; v likewise.  So a 0.05 mm leading edge makes the few pieces round
+    it dense in the direction across it, and nothing else.  Each direction has at most about ``most`` steps
+    (more are spread thinner in proportion).  Both ends of the box are among the parameters.
     """
     lo = np.asarray(box, float)[[0, 2]]
     hi = np.asarray(box, float)[[1, 3]]
@@ -749,25 +766,23 @@ def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 20
                                            inner[(inner > lo[axis]) & (inner < hi[axis])]]))
         edges = span_cells(breaks, degree)[3]                  # (cells + 1,)
         ends.append(np.append(np.column_stack([edges[:-1], 0.5 * (edges[:-1] + edges[1:])]).ravel(), edges[-1]))
-    s, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, *ends)   # (pieces_u + 1, pieces_v + 1, 3)
-    rates = normal_turn(s_u, s_v, s_uu, s_uv, s_vv)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        normal = np.cross(s_u, s_v)
-        normal /= np.linalg.norm(normal, axis=2, keepdims=True)
-    out = []
-    for axis in (0, 1):
-        pts, rate, nrm = (np.moveaxis(a, axis, 0) for a in (s, rates[axis], normal))     # along the direction first
-        chord = np.linalg.norm(np.diff(pts, axis=0), axis=2)                            # (pieces, other)
+    need = [np.zeros(len(e) - 1) for e in ends]
+    block = max(1, BEND_BLOCK // len(ends[0]) - 1)            # v pieces per block
+    for k0 in range(0, len(ends[1]) - 1, block):
+        k1 = min(k0 + block, len(ends[1]) - 1)
+        s, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, ends[0], ends[1][k0:k1 + 1])    # (pieces_u + 1, ., 3)
+        rate_u, rate_v = normal_turn(s_u, s_v, s_uu, s_uv, s_vv)
         with np.errstate(invalid="ignore", divide="ignore"):
-            angle = 2.0 * np.arcsin(np.minimum(np.linalg.norm(np.diff(nrm, axis=0), axis=2) / 2.0, 1.0))
-            bend = np.fmax(np.fmax(rate[:-1], rate[1:]), angle / chord)
-            need = chord * np.maximum(1.0 / spacing, np.nan_to_num(bend, nan=0.0, posinf=0.0))
-        count = np.ceil(np.nanmax(need, axis=1, initial=0.0) * (1.0 - 1e-9))           # (pieces,)
-        count = np.clip(np.nan_to_num(count, nan=1.0, posinf=most), 1, most)
+            normal = np.cross(s_u, s_v)
+            normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+        need[0] = np.maximum(need[0], _piece_steps(s, rate_u, normal, spacing))
+        need[1][k0:k1] = _piece_steps(*(np.swapaxes(a, 0, 1) for a in (s, rate_v, normal)), spacing)
+    out = []
+    for e, wanted in zip(ends, need):
+        count = np.clip(np.ceil(wanted * (1.0 - 1e-9)), 1, most)                        # (pieces,)
         if count.sum() > most:
             count = np.maximum(1, np.ceil(count * most / count.sum()))
         count = count.astype(np.int64)
-        e = ends[axis]
         piece = np.repeat(np.arange(len(count)), count)
         within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
         t = e[piece] + within / count[piece] * (e[piece + 1] - e[piece])
