@@ -10,7 +10,7 @@ from OCP.gp import gp_Pnt, gp_Vec
 
 from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis,
                               evaluate_curve, evaluate_surface, surface_basis, surface_derivative_bases,
-                              surface_derivatives, surface_normals)
+                              surface_derivatives, surface_first_jet, surface_normals)
 from hot2cold.kernel.convert import (curve_to_record, record_to_curve, record_to_surface,
                                      surface_to_record)
 
@@ -260,6 +260,22 @@ def test_derivative_bases_match_finite_differences():
     fv = (evaluate_surface(s, u, v + h) - evaluate_surface(s, u, v - h)) / (2 * h)
     np.testing.assert_allclose(su, fu, rtol=0, atol=1e-6 * np.abs(su).max())
     np.testing.assert_allclose(sv, fv, rtol=0, atol=1e-6 * np.abs(sv).max())
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_first_jet_is_the_points_and_derivatives(rational):
+    """surface_first_jet sums each row's poles itself: the same points and first derivatives as the sparse
+    bases, on random (rational) nets."""
+    rng = np.random.default_rng(7)
+    for p, q in ((1, 2), (3, 3), (2, 5)):
+        s = random_surface(rng, p, q, rational)
+        u, v = surface_params(rng, s)                 # every knot crossing and the domain's ends among them
+        points, s_u, s_v = surface_first_jet(s, u, v)
+        du, dv = surface_derivatives(s, u, v)
+        assert points.shape == s_u.shape == s_v.shape == (len(u), 3)
+        assert_close_rel(points, evaluate_surface(s, u, v), 1e-13)
+        assert_close_rel(s_u, du, 1e-13)
+        assert_close_rel(s_v, dv, 1e-13)
 
 
 # ----------------------------------------------------------------------------------- domain and shapes

@@ -434,6 +434,15 @@ def surface_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.n
     return du @ flat, dv @ flat
 
 
+def surface_first_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points and first partial derivatives ``(S, S_u, S_v)``, each (m, 3), at parameters ``u``, ``v`` (m,):
+    :func:`evaluate_surface` and :func:`surface_derivatives` from one evaluation of the basis rows, summed
+    over each row's ``(p + 1)(q + 1)`` poles without a sparse matrix (Gauss-Newton's inner loop)."""
+    cols, vals = _surface_rows(surface, u, v, 1)
+    near = surface.poles.reshape(-1, 3)[cols]                     # (m, (p + 1)(q + 1), 3)
+    return tuple(np.einsum("mw,mwk->mk", x, near) for x in vals)
+
+
 #: Relative tolerance of :func:`surface_normals`: a first derivative is taken as zero where it is below
 #: ``NORMAL_RTOL * sum_i |dB_i| * max |pole|`` (rounding noise of the sum), and the normal as undefined where
 #: ``|S_u x S_v| <= NORMAL_RTOL * |S_u| * |S_v|`` (parallel tangents).

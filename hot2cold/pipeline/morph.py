@@ -20,6 +20,7 @@ import os
 import time
 from contextlib import nullcontext
 from dataclasses import asdict, dataclass, replace
+from dataclasses import field as dataclass_field
 from functools import cached_property
 from typing import Callable
 
@@ -184,6 +185,10 @@ class MorphContext:
     tangent: list[TangentEdge]
     strain: float = 0.0
     noise: float = 0.0
+    #: :meth:`field_distance` of each (face, surface, grid) asked for: G1 and G2 ask for a face's fit against
+    #: every trial, and a fit's distance costs as much as a trial's (keys hold the objects, so no id is
+    #: reused while the context lives).
+    _distances: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
     def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
@@ -484,13 +489,17 @@ class MorphContext:
     def field_distance(self, k: int, surface: BSplineSurface, grid: FaceGrid) -> float:
         """The largest distance (mm) from a morphed ``surface`` of face ``k`` to its nodes' cold targets
         (eq. 21) and to the field's estimate over its ``grid`` (0 where it has neither)."""
+        key = (k, surface, grid)
+        if key in self._distances:
+            return self._distances[key]
         nodes = self.classification.nodes_of(Role.FACE, k)
         targets = np.concatenate([self.classification.foot[nodes] + self.field.displacements[nodes],
                                   grid.expected])
         uv = np.concatenate([self.classification.uv[nodes], grid.uv])
-        if not len(uv):
-            return 0.0
-        return float(surface_distances(surface, targets, uv, self.part.faces[k].uv_box, past_border=True).max())
+        distance = 0.0 if not len(uv) else \
+            float(surface_distances(surface, targets, uv, self.part.faces[k].uv_box, past_border=True).max())
+        self._distances[key] = distance
+        return distance
 
     def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
                    share: float | None = None, verb: str = "turning", floor: float | None = None) -> str:
