@@ -466,16 +466,19 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                                + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
         reach = GRID_REACH * classification.spacing(nodes)
         if len(uv) and len(nodes) and np.isfinite(reach):
-            node_distance = cKDTree(classification.foot[nodes]).query(hot)[0]
+            tree = cKDTree(classification.foot[nodes])
+            node_distance = tree.query(hot)[0]
             near = node_distance <= reach
             if near.any() and len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN:
                 own = near
                 local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
                 expected[near] += local(hot[near])
-                misses = np.linalg.norm(local(classification.foot[nodes]) - field.displacements[nodes], axis=1)
-                closest = cKDTree(classification.foot[nodes]).query(
-                    hot[near], k=min(_SLACK_NODES, len(nodes)))[1].reshape(int(near.sum()), -1)
-                slack[near] = misses[closest].max(axis=1)
+                closest = tree.query(hot[near], k=min(_SLACK_NODES, len(nodes)))[1].reshape(int(near.sum()), -1)
+                # the estimate's misses at those nodes only (a face's grid is sparser than its nodes)
+                asked, at = np.unique(closest, return_inverse=True)
+                misses = np.linalg.norm(local(classification.foot[nodes[asked]]) - field.displacements[nodes[asked]],
+                                        axis=1)
+                slack[near] = misses[at.reshape(closest.shape)].max(axis=1)
         if (~own).any():
             expected[~own] += estimator(hot[~own])
         if elements is not None and len(uv):
