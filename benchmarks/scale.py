@@ -1,16 +1,28 @@
-"""Speed and scale on Rotor 37: every phase timed at 10 k, 100 k and 1 M surface nodes, against the direct
+"""Speed and scale on two blades: every phase timed at 10 k, 100 k and 1 M surface nodes, against the direct
 approach.
 
 Run from the repository::
 
-    python benchmarks/scale.py                      # 10 000, 100 000 and 1 000 000 nodes
-    python benchmarks/scale.py 100000 --direct-max 100000
+    python benchmarks/scale.py                      # both blades, 10 000, 100 000 and 1 000 000 nodes
+    python benchmarks/scale.py 100000 --direct-max 100000 --blades thin_blade
 
-For each size the bundled CalculiX field of the Rotor 37 blade (44 478 surface nodes) is resampled onto an
-FE-like surface node set of that size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`, displacements by
-the FE solution's own interpolation over its quadratic boundary triangles, :func:`reference`), saved as
-``.npz`` under ``--cache`` (default ``benchmarks/.cache``, made once).  Then, in a fresh process per size so
-that its peak memory is its own:
+The blades (``--blades``, default both):
+
+* ``rotor37``: the bundled Rotor 37 blade (``sample_parts/rotor37_blade.step``, leading- and trailing-edge
+  faces about 0.25 mm in radius at the hub).  Its bundled CalculiX field (44 478 surface nodes) is resampled
+  onto an FE-like surface node set of each size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`,
+  displacements by the FE solution's own interpolation over its quadratic boundary triangles,
+  :func:`reference`).
+* ``thin_blade``: ``sample_parts/thin_blade.step`` (``sample_parts/make_thin_blade.py``): a twisted blade whose
+  two faces each wrap round a thin edge, smallest radius of curvature 0.059 mm at the leading edge and
+  0.026 mm at the trailing edge, as a blade-design tool writes them.  Its field is synthetic, not FE: the
+  smooth :class:`~hot2cold.testing.synthetic.UntwistField` of the twisted blade sample (``make_samples.py``'s
+  ``BLADE_FIELD``) on FE-like surface nodes of each size (:func:`hot2cold.kernel.sampling.fe_surface_nodes`).
+  (The corpus's ``rotor67.step`` has a 0.058 mm leading edge too, but it is a fluid passage with the blade as a
+  hole, and its blade faces end at the edges: none wraps round one.)
+
+Node sets are saved as ``.npz`` under ``--cache`` (default ``benchmarks/.cache``, made once).  Then, in a fresh
+process per blade and size so that its peak memory is its own:
 
 * the morph, read from the ``.npz`` (``hot2cold.pipeline.morph``), with the time of each phase: load (STEP and
   field), classify (classification and foot points), fit (edges, faces, G1), rebuild and sew, report, and
@@ -45,16 +57,21 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-STEP = ROOT / "sample_parts" / "rotor37_blade.step"
+#: The blades measured: their STEP files.
+STEPS = {"rotor37": ROOT / "sample_parts" / "rotor37_blade.step",
+         "thin_blade": ROOT / "sample_parts" / "thin_blade.step"}
 #: Spacing (mm) of the dense samples the cold part is measured at against the exact cold geometry.
 EXACT_SPACING = 0.25
-#: FE-like node spacing (mm) that gives about 36 000 nodes on the Rotor 37 blade; nodes grow as 1/spacing^2.
-REFERENCE = (0.5, 36_129)
+#: FE-like node spacing (mm) that gives about the number of nodes on each blade; nodes grow as 1/spacing^2.
+REFERENCE = {"rotor37": (0.5, 36_129), "thin_blade": (0.5, 34_000)}
 
 
-def reference():
-    """The map every resampled field is made of and every cold part is measured against: the bundled field's own
-    CalculiX solution (``benchmarks/fe_fields.py``, case ``rotor37``: the same 44 478 surface nodes and
+def reference(blade: str = "rotor37"):
+    """``thin_blade``: the :class:`~hot2cold.testing.synthetic.UntwistField` of the twisted blade sample (a callable
+    ``points (m, 3) -> displacements (m, 3)``).
+
+    ``rotor37``: the map every resampled field is made of and every cold part is measured against: the bundled
+    field's own CalculiX solution (``benchmarks/fe_fields.py``, case ``rotor37``: the same 44 478 surface nodes and
     displacements), interpolated by the quadratic triangles of its mesh's boundary
     (:class:`fe_fields.SurfaceInterpolator`), a callable ``points (m, 3) -> displacements (m, 3)``.  Continuous, as
     a field must be to be followed between any nodes: the field's local fits
@@ -63,16 +80,21 @@ def reference():
     cached by ``fe_fields``."""
     if str(ROOT / "benchmarks") not in sys.path:          # this folder, when loaded as a module
         sys.path.insert(0, str(ROOT / "benchmarks"))
+    if blade == "thin_blade":
+        from hot2cold.testing.synthetic import UntwistField
+
+        return UntwistField(axis_point=(0.0, 0.0, 0.0), span_axis=(0.0, 0.0, 1.0), untwist_deg_per_mm=0.03,
+                            stretch_per_mm2=1e-4, z0=0.0)
     import fe_fields
 
     solution = fe_fields.solution(fe_fields.case("rotor37"))
     return fe_fields.SurfaceInterpolator(solution.nodes, solution.triangles, solution.displacements)
 
 
-def resampled(n: int, cache: Path) -> Path:
-    """The Rotor 37 field resampled onto about ``n`` surface nodes (:func:`reference`), as an ``.npz`` in
+def resampled(n: int, cache: Path, blade: str = "rotor37") -> Path:
+    """The field of ``blade`` (:func:`reference`) on about ``n`` FE-like surface nodes, as an ``.npz`` in
     ``cache``."""
-    path = cache / f"rotor37_fe_{n}.npz"
+    path = cache / f"{blade}_fe_{n}.npz"
     if path.exists():
         return path
     from hot2cold.kernel.sampling import fe_surface_nodes
@@ -80,9 +102,9 @@ def resampled(n: int, cache: Path) -> Path:
 
     cache.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    spacing = REFERENCE[0] * np.sqrt(REFERENCE[1] / n)
-    points, _ = fe_surface_nodes(read_step(STEP), spacing)
-    np.savez(path, points=points, displacements=reference()(points))
+    spacing = REFERENCE[blade][0] * np.sqrt(REFERENCE[blade][1] / n)
+    points, _ = fe_surface_nodes(read_step(STEPS[blade]), spacing)
+    np.savez(path, points=points, displacements=reference(blade)(points))
     print(f"  resampled {len(points)} nodes (spacing {spacing:.3f} mm) in {time.perf_counter() - start:.0f} s",
           flush=True)
     return path
@@ -136,38 +158,38 @@ def compare(result, owner: np.ndarray, best: np.ndarray, uv: np.ndarray) -> dict
     }
 
 
-def exact_error(cold: Path) -> tuple[float, float, list[float]]:
+def exact_error(cold: Path, blade: str = "rotor37") -> tuple[float, float, list[float]]:
     """The cold part ``cold`` (a STEP file) against the exact cold geometry: dense samples
     :data:`EXACT_SPACING` mm apart inside every face of the hot blade, each moved by :func:`reference`, and their
     distance to the cold face of the same index (``real_parts.face_errors``).  The same samples and map at
     every size, so the figures of different sizes compare.  ``(max, mean, per-face max)`` in mm."""
     from hot2cold.kernel.step import read_step
 
-    field = reference()
+    field = reference(blade)
     import real_parts          # on sys.path since reference()
 
-    dists = real_parts.face_errors(read_step(STEP), read_step(cold), lambda p: p + field(p), EXACT_SPACING)
+    dists = real_parts.face_errors(read_step(STEPS[blade]), read_step(cold), lambda p: p + field(p), EXACT_SPACING)
     every = np.concatenate(dists)
     return float(every.max()), float(every.mean()), [float(d.max()) for d in dists]
 
 
-def one(n: int, field: Path, with_direct: bool) -> dict:
-    """Run one size in this process; returns its figures."""
+def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37") -> dict:
+    """Run one size of ``blade`` in this process; returns its figures."""
     from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
 
     settings = Settings(blas_threads=1)     # as the command line runs it
     start = time.perf_counter()
-    result = morph(STEP, field, settings)
+    result = morph(STEPS[blade], field, settings)
     total = time.perf_counter() - start
     with tempfile.TemporaryDirectory() as tmp:
         clock = time.perf_counter()
         result.write_step(Path(tmp) / "cold.step")
         write = time.perf_counter() - clock
-        exact = exact_error(Path(tmp) / "cold.step")
+        exact = exact_error(Path(tmp) / "cold.step", blade)
     t = result.report.timings
     out = {
-        "nodes": len(result.field.points),
+        "blade": blade, "nodes": len(result.field.points),
         "load": t["load"], "classify": t["classify"],
         "fit": t["edges"] + t["faces"] + t.get("g1", 0.0) + t.get("refine", 0.0),
         "rebuild_sew": t["rebuild"] + t["sew"], "report": t["report"], "write": write,
@@ -179,7 +201,7 @@ def one(n: int, field: Path, with_direct: bool) -> dict:
     if with_direct:
         from hot2cold.pipeline.load import load_part
 
-        hot = load_part(STEP, settings)          # the morph's own part holds the cold geometry by now
+        hot = load_part(STEPS[blade], settings)          # the morph's own part holds the cold geometry by now
         node_distance, _ = settings.lengths(hot.diagonal)
         clock = time.perf_counter()
         owner, best, uv = direct(hot, result.field.points, node_distance)
@@ -191,6 +213,8 @@ def one(n: int, field: Path, with_direct: bool) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sizes", nargs="*", type=int, default=[10_000, 100_000, 1_000_000])
+    parser.add_argument("--blades", default=",".join(STEPS),
+                        help=f"comma-separated, of {', '.join(STEPS)} (default all)")
     parser.add_argument("--direct-max", type=int, default=100_000,
                         help="run the direct approach for sizes up to this (default 100000)")
     parser.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache")
@@ -198,25 +222,43 @@ def main(argv=None) -> int:
     parser.add_argument("--field", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--direct", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    blades = args.blades.split(",")
     if args.one is not None:
-        print(json.dumps(one(args.one, args.field, args.direct)))
+        print(json.dumps(one(args.one, args.field, args.direct, blades[0])))
         return 0
+    for blade in blades:
+        if blade not in STEPS:
+            parser.error(f"unknown blade {blade!r}: one of {', '.join(STEPS)}")
 
     rows = []
-    for n in args.sizes:
-        print(f"{n} nodes:", flush=True)
-        field = resampled(n, args.cache)
-        child = subprocess.run([sys.executable, __file__, "--one", str(n), "--field", str(field)]
-                               + (["--direct"] if n <= args.direct_max else []),
-                               capture_output=True, text=True, check=False)
-        if child.returncode != 0:
-            print(child.stderr[-3000:])
-            return 1
-        row = json.loads(child.stdout.strip().splitlines()[-1])
-        rows.append(row)
-        print("  " + json.dumps(row), flush=True)
+    for blade in blades:
+        for n in args.sizes:
+            print(f"{blade}, {n} nodes:", flush=True)
+            field = resampled(n, args.cache, blade)
+            child = subprocess.run([sys.executable, __file__, "--one", str(n), "--field", str(field),
+                                    "--blades", blade] + (["--direct"] if n <= args.direct_max else []),
+                                   capture_output=True, text=True, check=False)
+            if child.returncode != 0:
+                print(child.stderr[-3000:])
+                return 1
+            row = json.loads(child.stdout.strip().splitlines()[-1])
+            rows.append(row)
+            print("  " + json.dumps(row), flush=True)
+    for blade in blades:
+        _summary(blade, [r for r in rows if r["blade"] == blade])
+    return 0
 
+
+def _identical(c: dict) -> bool:
+    """Whether the comparison ``c`` (:func:`compare`) finds the classification identical to the direct approach."""
+    return (c["other_face"] == 0 and c["distance_max_diff_mm"] <= 1e-9 and c["uv_max_rel_diff"] <= 1e-9
+            and c["boundary_nodes_on_a_direct_face"])
+
+
+def _summary(blade: str, rows: list[dict]) -> None:
+    """Print the table of ``rows`` (one blade's sizes) and the targets."""
     print()
+    print(f"{blade}:")
     head = ("nodes", "load", "classify", "fit", "rebuild+sew", "report", "write", "total", "peak MB", "us/node",
             "direct", "ratio")
     print(" ".join(f"{h:>11}" for h in head))
@@ -240,15 +282,14 @@ def main(argv=None) -> int:
     def nearest(n):
         return by_size[min(by_size, key=lambda k: abs(k - n))] if by_size else None
 
-    r100, r1m = nearest(100_000), nearest(1_000_000)
-    if r100 is not None and "direct" in r100:
-        c = r100["compare"]
-        same = (c["other_face"] == 0 and c["distance_max_diff_mm"] <= 1e-9 and c["uv_max_rel_diff"] <= 1e-9
-                and c["boundary_nodes_on_a_direct_face"])
-        ratio = r100["direct"] / r100["classify"]
-        print(f"target: {r100['nodes']} nodes, classify >= 20x the direct approach: {ratio:.1f}x "
-              f"{'met' if ratio >= 20 else 'MISSED'}; identical results: {'yes' if same else 'NO'}")
-    if r100 is not None:
+    r10, r100, r1m = nearest(10_000), nearest(100_000), nearest(1_000_000)
+    for r, size, least in ((r10, 10_000, 10), (r100, 100_000, 30)):
+        if r is not None and "direct" in r and 0.5 * size < r["nodes"] < 2 * size:
+            ratio = r["direct"] / r["classify"]
+            print(f"target: {r['nodes']} nodes, classify >= {least}x the direct approach: {ratio:.1f}x "
+                  f"{'met' if ratio >= least else 'MISSED'}; identical results: "
+                  f"{'yes' if _identical(r['compare']) else 'NO'}")
+    if r100 is not None and 50_000 < r100["nodes"] < 200_000:
         print(f"target: {r100['nodes']} nodes end to end <= 10 s: {r100['total']:.1f} s "
               f"{'met' if r100['total'] <= 10 else 'MISSED'}")
     if r1m is not None and r1m["nodes"] > 500_000:
@@ -263,7 +304,6 @@ def main(argv=None) -> int:
         per = [1e6 * r["total"] / r["nodes"] for r in rows]
         print("time per node (us) by size: " + ", ".join(f"{r['nodes']}: {p:.1f}" for r, p in zip(rows, per))
               + f"; {'no worse than linear' if per[-1] <= per[0] * 1.1 else 'WORSE than linear'}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -80,33 +80,46 @@ def airfoil(theta: np.ndarray, chord: float, thickness: float = 0.08, camber: fl
     return np.column_stack([x, y])
 
 
-def blade_section(z: float):
-    """The section wire at height ``z`` (mm): 4 B-spline edges (LE, suction side, TE, pressure side)."""
-    chord = 42.0 - 4.0 * z / SPAN
-    twist = math.radians(-15.0 + 30.0 * z / SPAN)
-    theta = -LE_HALF_ANGLE + 2.0 * math.pi * np.arange(N_SECTION_POINTS) / N_SECTION_POINTS
-    xy = airfoil(theta, chord)
+def section_curve(z: float, chord: float, twist: float, theta: np.ndarray, **shape):
+    """The periodic cubic B-spline (made non-periodic, ``Geom_BSplineCurve``) at height ``z`` (mm) that
+    interpolates the :func:`airfoil` of ``chord`` at the angles ``theta (m,)`` (its parameters, period 2 pi;
+    ``shape``: the airfoil's other arguments), stacked on the camber line at 40 % chord and turned by
+    ``twist`` radians about the z axis."""
+    xy = airfoil(theta, chord, **shape)
     xy -= [0.4 * chord, 4.0 * 0.05 * 0.4 * 0.6 * chord]   # stacking line: the camber line at 40 % chord
     rot = np.array([[math.cos(twist), -math.sin(twist)], [math.sin(twist), math.cos(twist)]])
     xy = xy @ rot.T
-    pts = TColgp_HArray1OfPnt(1, N_SECTION_POINTS)
-    par = TColStd_HArray1OfReal(1, N_SECTION_POINTS + 1)  # periodic: one more parameter closes the curve
+    pts = TColgp_HArray1OfPnt(1, len(theta))
+    par = TColStd_HArray1OfReal(1, len(theta) + 1)  # periodic: one more parameter closes the curve
     for i, ((x, y), t) in enumerate(zip(xy, theta), start=1):
         pts.SetValue(i, gp_Pnt(float(x), float(y), z))
         par.SetValue(i, float(t))
-    par.SetValue(N_SECTION_POINTS + 1, float(theta[0] + 2.0 * math.pi))
+    par.SetValue(len(theta) + 1, float(theta[0] + 2.0 * math.pi))
     interp = GeomAPI_Interpolate(pts, par, True, 1e-9)
     interp.Perform()
     curve = interp.Curve()
     curve.SetNotPeriodic()
-    cuts = [-LE_HALF_ANGLE, LE_HALF_ANGLE, math.pi - TE_HALF_ANGLE, math.pi + TE_HALF_ANGLE,
-            2.0 * math.pi - LE_HALF_ANGLE]
+    return curve
+
+
+def split_wire(curve, cuts) -> object:
+    """The wire of the pieces of ``curve`` between consecutive parameters of ``cuts``, one edge each."""
     wire = BRepBuilderAPI_MakeWire()
     for t0, t1 in zip(cuts[:-1], cuts[1:]):
         piece = curve.Copy()
         piece.Segment(t0, t1)
         wire.Add(BRepBuilderAPI_MakeEdge(piece).Edge())
     return wire.Wire()
+
+
+def blade_section(z: float):
+    """The section wire at height ``z`` (mm): 4 B-spline edges (LE, suction side, TE, pressure side)."""
+    chord = 42.0 - 4.0 * z / SPAN
+    twist = math.radians(-15.0 + 30.0 * z / SPAN)
+    theta = -LE_HALF_ANGLE + 2.0 * math.pi * np.arange(N_SECTION_POINTS) / N_SECTION_POINTS
+    cuts = [-LE_HALF_ANGLE, LE_HALF_ANGLE, math.pi - TE_HALF_ANGLE, math.pi + TE_HALF_ANGLE,
+            2.0 * math.pi - LE_HALF_ANGLE]
+    return split_wire(section_curve(z, chord, twist, theta), cuts)
 
 
 def make_blade() -> TopoDS_Solid:

@@ -639,17 +639,22 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     return out
 
 
+def _quotient_jet(a, a_u, a_v, a_uu, a_uv, a_vv) -> tuple[np.ndarray, ...]:
+    """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (..., 3), of the homogeneous ``A = (w S, w)`` and its
+    derivatives, each (..., 4), by the quotient rule."""
+    w, w_u, w_v, w_uu, w_uv, w_vv = (x[..., 3:4] for x in (a, a_u, a_v, a_uu, a_uv, a_vv))
+    s = a[..., :3] / w
+    s_u = (a_u[..., :3] - w_u * s) / w
+    s_v = (a_v[..., :3] - w_v * s) / w
+    s_uu = (a_uu[..., :3] - 2.0 * w_u * s_u - w_uu * s) / w
+    s_uv = (a_uv[..., :3] - w_u * s_v - w_v * s_u - w_uv * s) / w
+    s_vv = (a_vv[..., :3] - 2.0 * w_v * s_v - w_vv * s) / w
+    return s, s_u, s_v, s_uu, s_uv, s_vv
+
+
 def surface_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, ...]:
     """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (m, 3), by the quotient rule on the homogeneous form."""
-    a, a_u, a_v, a_uu, a_uv, a_vv = _homogeneous_derivatives(surface, u, v)
-    w, w_u, w_v, w_uu, w_uv, w_vv = (x[:, 3:4] for x in (a, a_u, a_v, a_uu, a_uv, a_vv))
-    s = a[:, :3] / w
-    s_u = (a_u[:, :3] - w_u * s) / w
-    s_v = (a_v[:, :3] - w_v * s) / w
-    s_uu = (a_uu[:, :3] - 2.0 * w_u * s_u - w_uu * s) / w
-    s_uv = (a_uv[:, :3] - w_u * s_v - w_v * s_u - w_uv * s) / w
-    s_vv = (a_vv[:, :3] - 2.0 * w_v * s_v - w_vv * s) / w
-    return s, s_u, s_v, s_uu, s_uv, s_vv
+    return _quotient_jet(*_homogeneous_derivatives(surface, u, v))
 
 
 def surface_second_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -681,3 +686,135 @@ def mean_curvature(surface: BSplineSurface, u, v) -> np.ndarray:
     n_ = np.einsum("ij,ij->i", s_vv, normal)
     with np.errstate(divide="ignore", invalid="ignore"):
         return (l_ * g - 2.0 * m_ * f + n_ * e) / (2.0 * (e * g - f * f))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Tensor-product grids: every point of u (m_u,) x v (m_v,) as B_u . P . B_v^T (homogeneous, per coordinate),
+# m_u + m_v basis rows instead of m_u m_v; and grids dense where the surface bends (Newton's start points).
+# ----------------------------------------------------------------------------------------------------------
+
+def _grid_homogeneous(surface: BSplineSurface, u, v, nu: int) -> dict[tuple[int, int], np.ndarray]:
+    """The homogeneous surface ``A = sum w_ij N_i(u) N_j(v) (P_ij, 1)`` and its derivatives ``d^(a+b) A /
+    du^a dv^b`` for ``a + b <= nu`` on the grid ``u (m_u,) x v (m_v,)`` (parameters in the domain up to
+    ``PARAM_RTOL``): ``{(a, b): (m_u, m_v, 4)}``, each ``B_u^(a) . H . B_v^(b)T`` per coordinate with the
+    basis matrices ``B_u^(a) (m_u, n_u)``, ``B_v^(b) (m_v, n_v)`` and the homogeneous poles ``H (n_u, n_v, 4)``.
+    """
+    u0, u1, v0, v1 = surface.domain
+    uu, vv = _parameters(u, u0, u1, "u"), _parameters(v, v0, v1, "v")
+    n_u, n_v = surface.shape
+    su, bu = _span_rows(uu, surface.u_knots, surface.u_degree, nu)
+    sv, bv = _span_rows(vv, surface.v_knots, surface.v_degree, nu)
+    homo = _homogeneous(surface.poles, surface.weights).reshape(n_u, n_v * 4)
+    out = {}
+    for a in range(nu + 1):
+        left = (_to_csr(su, bu[a], n_u) @ homo).reshape(len(uu), n_v, 4)        # (m_u, n_v, 4)
+        right = left.transpose(1, 0, 2).reshape(n_v, len(uu) * 4)               # (n_v, m_u * 4)
+        for b in range(nu + 1 - a):
+            grid = (_to_csr(sv, bv[b], n_v) @ right).reshape(len(vv), len(uu), 4)
+            out[a, b] = grid.transpose(1, 0, 2)
+    return out
+
+
+def grid_points(surface: BSplineSurface, u, v) -> np.ndarray:
+    """Points ``S(u_i, v_j)`` (m_u, m_v, 3) of ``surface`` on the tensor grid of ``u (m_u,)`` and ``v (m_v,)``:
+    :func:`evaluate_surface` at every pair, from ``m_u + m_v`` basis rows (rational surfaces by their
+    homogeneous poles)."""
+    a = _grid_homogeneous(surface, u, v, 0)[0, 0]
+    return a[..., :3] / a[..., 3:]
+
+
+def grid_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, ...]:
+    """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (m_u, m_v, 3), on the tensor grid of ``u (m_u,)`` and
+    ``v (m_v,)``: :func:`surface_jet` at every pair (at a knot, the span on the larger-parameter side)."""
+    a = _grid_homogeneous(surface, u, v, 2)
+    return _quotient_jet(*(a[k] for k in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))))
+
+
+def normal_turn(s_u: np.ndarray, s_v: np.ndarray, s_uu: np.ndarray, s_uv: np.ndarray,
+                s_vv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How fast the unit normal turns along u and along v, in radians per mm of the parameter line (1/mm):
+    ``|n_u| / |S_u|`` and ``|n_v| / |S_v|``, each (...), from the first and second derivatives, each
+    (..., 3).  On a sphere of radius R both are 1/R; along a straight line of a cylinder, 0.  NaN where the
+    normal or a tangent is undefined (a collapsed boundary).
+
+    With ``N = S_u x S_v`` and ``n = N / |N|``: ``n_u = (N_u - (n . N_u) n) / |N|``, ``N_u = S_uu x S_v + S_u x
+    S_uv`` (and ``N_v = S_uv x S_v + S_u x S_vv``).
+    """
+    big_n = np.cross(s_u, s_v)
+    size = np.linalg.norm(big_n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = big_n / size
+        rates = []
+        for d, tangent in ((np.cross(s_uu, s_v) + np.cross(s_u, s_uv), s_u),
+                           (np.cross(s_uv, s_v) + np.cross(s_u, s_vv), s_v)):
+            turn = d - np.sum(n * d, axis=-1, keepdims=True) * n
+            rate = np.linalg.norm(turn, axis=-1) / (size[..., 0] * np.linalg.norm(tangent, axis=-1))
+            rates.append(np.where(np.isfinite(rate), rate, np.nan))
+    return rates[0], rates[1]
+
+
+#: Most points of the jet :func:`bend_parameters` evaluates at once (a block of v lines at a time): 2^18 points
+#: of 6 derivatives, about 40 MB, however many knot spans the surface has.
+BEND_BLOCK = 1 << 18
+
+
+def _piece_steps(s: np.ndarray, rate: np.ndarray, normal: np.ndarray, spacing: float) -> np.ndarray:
+    """Steps each piece wants along the first axis of ``s (k + 1, l, 3)`` (points at the pieces' ends, on l
+    lines across), with the turn ``rate (k + 1, l)`` of the normal along that axis and the unit normals
+    ``normal (k + 1, l, 3)``: ``L max(1 / spacing, bend)`` (not rounded), the largest over the l lines, (k,)."""
+    chord = np.linalg.norm(np.diff(s, axis=0), axis=2)                                   # (k, l)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        angle = 2.0 * np.arcsin(np.minimum(np.linalg.norm(np.diff(normal, axis=0), axis=2) / 2.0, 1.0))
+        bend = np.fmax(np.fmax(rate[:-1], rate[1:]), angle / chord)
+        need = chord * np.maximum(1.0 / spacing, np.nan_to_num(bend, nan=0.0, posinf=0.0))
+    return np.nan_to_num(np.nanmax(need, axis=1, initial=0.0), nan=0.0)
+
+
+def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 2000
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters ``u (m_u,)`` and ``v (m_v,)`` of a tensor grid over ``box = (u0, u1, v0, v1)`` (within the
+    domain) whose neighbouring points lie at most about ``spacing`` mm apart, and closer where the surface
+    bends: about its radius of curvature apart across a bend (the normal turning by about a radian from
+    point to point), piece by piece of every knot span.
+
+    Each direction is cut at its knots inside the box, every knot span into ``degree + 1`` equal cells
+    (:func:`span_cells`) and every cell in two halves, the pieces.  On the grid of the pieces' ends in both
+    directions (:func:`grid_jet`, :data:`BEND_BLOCK` points at a time), piece j of u gets ``ceil(L_j max(1 /
+    spacing, k_j))`` equal parameter steps, with ``L_j`` its longest chord (mm) and ``k_j`` the fastest turn
+    of the normal along u at its ends (:func:`normal_turn`) or between them (the angle between the end
+    normals over ``L_j``), over all of v; v likewise.  So a 0.05 mm leading edge makes the few pieces round
+    it dense in the direction across it, and nothing else.  Each direction has at most about ``most`` steps
+    (more are spread thinner in proportion).  Both ends of the box are among the parameters.
+    """
+    lo = np.asarray(box, float)[[0, 2]]
+    hi = np.asarray(box, float)[[1, 3]]
+    ends = []
+    for axis, (knots, degree) in enumerate(((surface.u_knots, surface.u_degree),
+                                            (surface.v_knots, surface.v_degree))):
+        inner = knot_breaks(knots, degree)
+        breaks = np.unique(np.concatenate([[lo[axis], hi[axis]],
+                                           inner[(inner > lo[axis]) & (inner < hi[axis])]]))
+        edges = span_cells(breaks, degree)[3]                  # (cells + 1,)
+        ends.append(np.append(np.column_stack([edges[:-1], 0.5 * (edges[:-1] + edges[1:])]).ravel(), edges[-1]))
+    need = [np.zeros(len(e) - 1) for e in ends]
+    block = max(1, BEND_BLOCK // len(ends[0]) - 1)            # v pieces per block
+    for k0 in range(0, len(ends[1]) - 1, block):
+        k1 = min(k0 + block, len(ends[1]) - 1)
+        s, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, ends[0], ends[1][k0:k1 + 1])    # (pieces_u + 1, ., 3)
+        rate_u, rate_v = normal_turn(s_u, s_v, s_uu, s_uv, s_vv)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            normal = np.cross(s_u, s_v)
+            normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+        need[0] = np.maximum(need[0], _piece_steps(s, rate_u, normal, spacing))
+        need[1][k0:k1] = _piece_steps(*(np.swapaxes(a, 0, 1) for a in (s, rate_v, normal)), spacing)
+    out = []
+    for e, wanted in zip(ends, need):
+        count = np.clip(np.ceil(wanted * (1.0 - 1e-9)), 1, most)                        # (pieces,)
+        if count.sum() > most:
+            count = np.maximum(1, np.ceil(count * most / count.sum()))
+        count = count.astype(np.int64)
+        piece = np.repeat(np.arange(len(count)), count)
+        within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        t = e[piece] + within / count[piece] * (e[piece + 1] - e[piece])
+        out.append(np.append(t, e[-1]))
+    return out[0], out[1]
