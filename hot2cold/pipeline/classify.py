@@ -8,12 +8,12 @@ vertex fixes that vertex.  Everything else (volume nodes, other parts) is left o
 Not every node is projected onto every face: a k-d tree over points sampled inside every face's trimmed
 domain names the few candidate faces of each node.  On those, the foot points are found by Newton's method
 for all nodes of a face at once (:mod:`hot2cold.core.footpoint`), each node started at the nearest point of a
-grid dense only where the face bends (knot span by knot span, :func:`start_grid`); the kernel's
+grid dense only where the face bends (knot span by knot span, :func:`start_grid`), and again from the far
+side of a thin edge where a start there is among its nearest (:func:`_foot_points`); the kernel's
 ``GeomAPI_ProjectPointOnSurf`` settles what Newton leaves open (a few per thousand nodes, near the faces'
-borders).  The result is the kernel's: the same
-faces, distances and parameters to 1e-9 as every node projected onto every face (``tests/test_footpoint.py``,
-``benchmarks/scale.py``): on Rotor 37, 14 times faster than that at 10 000 nodes, 35 to 52 times at 100 000;
-on the thin blade of ``sample_parts/thin_blade.step`` (edges 0.06 and 0.03 mm in radius), 14 and 47 times.
+borders).  The result is the kernel's: the same faces, distances and parameters to 1e-9 as every node
+projected onto every face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; the README's "Speed and
+scale" gives how much faster, on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
 """
 from __future__ import annotations
 
