@@ -81,10 +81,11 @@ def reference(blade: str = "rotor37"):
     if str(ROOT / "benchmarks") not in sys.path:          # this folder, when loaded as a module
         sys.path.insert(0, str(ROOT / "benchmarks"))
     if blade == "thin_blade":
-        from hot2cold.testing.synthetic import UntwistField
+        if str(ROOT / "sample_parts") not in sys.path:
+            sys.path.insert(0, str(ROOT / "sample_parts"))
+        import make_samples
 
-        return UntwistField(axis_point=(0.0, 0.0, 0.0), span_axis=(0.0, 0.0, 1.0), untwist_deg_per_mm=0.03,
-                            stretch_per_mm2=1e-4, z0=0.0)
+        return make_samples.BLADE_FIELD
     import fe_fields
 
     solution = fe_fields.solution(fe_fields.case("rotor37"))
