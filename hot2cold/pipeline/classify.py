@@ -200,9 +200,10 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
     _, near = cKDTree(grid).query(points, k=k, workers=-1)
     near = near.reshape(len(points), k)
     fp = project_to_surface(surface, points, grid_uv[near[:, 0]], box)
-    normal = surface_normals(surface, grid_uv[:, 0], grid_uv[:, 1])
+    asked, at = np.unique(near, return_inverse=True)          # the normals of those starts only
+    normal = surface_normals(surface, grid_uv[asked, 0], grid_uv[asked, 1])[at.reshape(near.shape)]   # (m, k, 3)
     with np.errstate(invalid="ignore"):
-        opposed = np.einsum("mkc,mc->mk", normal[near], normal[near[:, 0]]) < 0.0      # NaN compares False
+        opposed = np.einsum("mkc,mc->mk", normal, normal[:, 0]) < 0.0                 # NaN compares False
     again = np.flatnonzero(opposed.any(axis=1))
     if not len(again):
         return fp
