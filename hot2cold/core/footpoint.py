@@ -147,8 +147,8 @@ def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> n
     """Distances ``(m,)`` of ``points (m, 3)`` to ``curve`` by Gauss-Newton from the parameters ``t (m,)`` (the
     points' hot parameters, or the kernel's foot points to polish): the smallest distance met on the way, an
     upper bound of the distance to the curve, and no larger than the start's.  A point whose step is below
-    :data:`STEP_RTOL` of the domain (or pushes out of it) is settled: it is not evaluated again, as its next
-    steps would find the same distance."""
+    :data:`STEP_RTOL` of the domain (or pushes out of it) is settled: it is evaluated once more where that
+    step takes it and not again, as its next steps would find the same distance."""
     points = np.asarray(points, float)
     lo, hi = curve.domain
     t = np.clip(np.array(t, float), lo, hi)
@@ -165,7 +165,12 @@ def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> n
         dd = np.sum(d * d, 1)
         new = np.clip(ta + np.where(dd > 1e-300, np.sum(d * r, 1) / np.where(dd > 1e-300, dd, 1.0), 0.0), lo, hi)
         t[active] = new
-        active = active[np.abs(new - ta) > settle]
+        settled = np.abs(new - ta) <= settle
+        if settled.any():             # the settling step's own point: off by the step squared from here on
+            rows = active[settled]
+            best[rows] = np.minimum(best[rows], np.linalg.norm(points[rows] - evaluate_curve(curve, t[rows]),
+                                                               axis=1))
+        active = active[~settled]
         if not len(active):
             break
     return best
@@ -183,9 +188,10 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
     past a trim or a seam (the sides of a face are its edges' business).  A point on the seam of a NIST
     Geom face, moved by the field 9.4e-3 mm along the surface across it, was 4.5e-8 mm off the cold face.
 
-    A point whose (clipped) step is below :data:`STEP_RTOL` of the box is settled: its next steps would
-    evaluate the same place, so it is not evaluated again, and its step counts as the last one.  Most points
-    settle in two or three steps of the :data:`LOCAL_STEPS`.
+    A point whose (clipped) step is below :data:`STEP_RTOL` of the box is settled: it is evaluated once more
+    where that step takes it (on the surface, a residual of the step times ``|S_u|``: 2.6e-8 mm on Rotor 67's
+    degree-14 faces under an exactly affine field) and not again, and its step counts as the last one.  Most
+    points settle in two or three steps of the :data:`LOCAL_STEPS`.
     """
     points = np.asarray(points, float)
     uv = np.array(uv, float).reshape(-1, 2)
@@ -221,6 +227,11 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
             rows = active[out]
             best[rows] = np.minimum(best[rows], np.abs(np.sum(r[out] * normal, axis=1)))
         uv[active] = new
+        settled = last & (step < LOCAL_STEPS)
+        if settled.any():             # the settling step's own point: off by the step squared from here on
+            rows = active[settled]
+            best[rows] = np.minimum(best[rows], np.linalg.norm(
+                points[rows] - evaluate_surface(surface, uv[rows, 0], uv[rows, 1]), axis=1))
         active = active[~last]
         if not len(active):
             break
