@@ -187,7 +187,7 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
     """Foot points of ``points (m, 3)`` on ``face`` by Newton's method (:func:`project_to_surface` within
     ``box``), each started at the nearest point of the face's :func:`start_grid`, and again at the nearest
     of its ``_FAR_SIDE_STARTS`` nearest starts whose normal points the other way, where there is one: the
-    far side of a thin edge.  The nearer settled foot point is kept.
+    far side of a thin edge.  Where both settle, the nearer foot point is kept.
 
     The start grid is dense across a bend but not along it (a trailing edge's spacing across is its radius,
     along it the plain spacing): a node well off the surface next to a thin edge, nearer to a grid line
@@ -208,11 +208,12 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
     if not len(again):
         return fp
     other = project_to_surface(surface, points[again], grid_uv[near[again, opposed[again].argmax(axis=1)]], box)
-    better = other.settled & (~fp.settled[again] | (other.distance < fp.distance[again]))
+    # a node Newton left open from its nearest start stays open: the kernel finds its nearest foot point
+    better = other.settled & fp.settled[again] & (other.distance < fp.distance[again])
     rows = again[better]
-    uv, distance, settled = fp.uv.copy(), fp.distance.copy(), fp.settled.copy()
-    uv[rows], distance[rows], settled[rows] = other.uv[better], other.distance[better], True
-    return FootPoints(uv, distance, settled)
+    uv, distance = fp.uv.copy(), fp.distance.copy()
+    uv[rows], distance[rows] = other.uv[better], other.distance[better]
+    return FootPoints(uv, distance, fp.settled)
 
 
 def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
