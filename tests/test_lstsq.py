@@ -234,11 +234,12 @@ def _dense_reference(a: np.ndarray, b: np.ndarray, epsilon: float = FLT_EPSILON)
     return x.reshape((a.shape[1],) + b.shape[1:]), rank, sv, sv[0] / sv[rank - 1]
 
 
-def _assert_matches_reference(sol: TsvdSolution, a: np.ndarray, b: np.ndarray):
+def _assert_matches_reference(sol: TsvdSolution, a: np.ndarray, b: np.ndarray, rounding: float = 1e-12):
+    """``sol`` is the dense reference's (its solution to ``rounding`` of its largest entry)."""
     x, rank, sv, condition = _dense_reference(a, b)
     assert sol.x.shape == x.shape
     assert sol.rank == rank and sol.n_unknowns == a.shape[1]
-    np.testing.assert_allclose(sol.x, x, rtol=0, atol=1e-12 * np.abs(x).max())
+    np.testing.assert_allclose(sol.x, x, rtol=0, atol=rounding * np.abs(x).max())
     np.testing.assert_allclose(sol.singular_values, sv, rtol=1e-12, atol=1e-12 * sv[0])
     assert sol.condition == pytest.approx(condition, rel=1e-10)
     assert sol.cutoff == pytest.approx(sv[0] * a.shape[1] * FLT_EPSILON, rel=1e-12)
@@ -392,3 +393,100 @@ def test_noise_beyond_everything_the_data_say_gives_the_prior():
     prior = np.zeros_like(x_true)
     sol = solve_tsvd(a, b, prior=prior, noise=1e6, noisy_rows=100)
     assert sol.smoothing == np.inf and np.array_equal(sol.x, prior)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Above full_svd_up_to unknowns a clearly full-rank tall problem is solved without the SVD.
+# ----------------------------------------------------------------------------------------------------------
+
+def _assert_matches_without_svd(sol: TsvdSolution, a: np.ndarray, b: np.ndarray, rounding: float = 1e-11):
+    """``sol`` came from the triangular solve: the reference's solution (to ``rounding`` of its largest entry)
+    and rank, its extreme singular values and condition to the Lanczos tolerance, and no spectrum."""
+    x, rank, sv, condition = _dense_reference(a, b)
+    assert sol.singular_values is None
+    assert sol.rank == rank == a.shape[1]
+    np.testing.assert_allclose(sol.x, x, rtol=0, atol=rounding * np.abs(x).max())
+    assert sol.sigma_max == pytest.approx(sv[0], rel=1e-7)
+    assert sol.sigma_min == pytest.approx(sv[-1], rel=1e-7)
+    assert sol.condition == pytest.approx(condition, rel=1e-7)
+    assert sol.cutoff == pytest.approx(sv[0] * a.shape[1] * FLT_EPSILON, rel=1e-7)
+
+
+@pytest.mark.parametrize("fmt", ["dense", "csr"])
+@pytest.mark.parametrize("k", [None, 3])
+def test_full_rank_tall_problems_skip_the_svd(fmt, k):
+    rng = np.random.default_rng(21)
+    a = rng.normal(size=(211, 17))
+    a[rng.random(a.shape) < 0.5] = 0.0
+    a += np.eye(211, 17)
+    b = rng.normal(size=211 if k is None else (211, k))
+    _assert_matches_without_svd(solve_tsvd(_as_format(a, fmt), b, full_svd_up_to=0), a, b)
+
+
+def test_a_spline_fit_above_the_threshold_skips_the_svd_by_default():
+    # bicubic 30 x 20 poles (600 unknowns > FULL_SVD_UP_TO), 20 000 data points spread over the whole domain
+    surface = _surface(30, 20)
+    rng = np.random.default_rng(22)
+    uv = rng.uniform(0.0, 1.0, (20_000, 2))
+    a = surface_basis(surface, uv[:, 0], uv[:, 1])
+    b = np.column_stack([np.sin(2 * uv[:, 0]) * uv[:, 1], uv[:, 0] * uv[:, 1], np.cos(uv[:, 1])])
+    sol = solve_tsvd(a, b)
+    _assert_matches_without_svd(sol, a.toarray(), b)
+    with_svd = solve_tsvd(a, b, full_svd_up_to=10 ** 6)
+    assert with_svd.singular_values is not None and with_svd.rank == sol.rank
+
+
+@pytest.mark.parametrize("k", [None, 3])
+def test_rank_deficient_tall_problems_still_take_the_svd(k):
+    # the surface with an empty patch (zero columns: a zero on R's diagonal) and the curve with an empty
+    # stretch (nearly zero columns): the SVD decides, whatever the threshold
+    surface = _surface(13, 9)
+    rng = np.random.default_rng(23)
+    uv = rng.uniform(0.0, 1.0, (3000, 2))
+    uv = uv[~((uv[:, 0] > 0.3) & (uv[:, 0] < 0.7) & (uv[:, 1] > 1 / 3))]
+    a = surface_basis(surface, uv[:, 0], uv[:, 1]).toarray()
+    b = rng.normal(size=len(uv) if k is None else (len(uv), k))
+    sol = solve_tsvd(a, b, full_svd_up_to=0)
+    assert sol.rank_deficient
+    _assert_matches_reference(sol, a, b)
+
+
+@pytest.mark.parametrize("ratio, svd", [(1.05, False), (1.005, True), (0.999, True)])
+def test_near_the_cutoff_the_svd_decides(ratio, svd):
+    # singular values 1 .. sigma_n with sigma_n = ratio * cutoff: clearly above the cut-off the triangular
+    # solve, within FULL_RANK_MARGIN of it (or below) the SVD, which keeps or drops it exactly
+    n = 8
+    rng = np.random.default_rng(24)
+    u = np.linalg.qr(rng.normal(size=(100, n)))[0]
+    v = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    sigma = np.geomspace(1.0, ratio * n * FLT_EPSILON, n)
+    a = (u * sigma) @ v.T
+    b = rng.normal(size=(100, 2))
+    sol = solve_tsvd(a, b, full_svd_up_to=0)
+    assert (sol.singular_values is not None) == svd
+    assert sol.rank == (n if ratio > 1 else n - 1)
+    rounding = 1e-15 * sigma[0] / sigma[-1]            # condition 1e6: the rounding of either solution
+    if svd:
+        _assert_matches_reference(sol, a, b, rounding)
+    else:
+        _assert_matches_without_svd(sol, a, b, rounding)
+
+
+@pytest.mark.parametrize("noise", [0.05, 0.001])
+def test_noise_smoothing_is_the_same_without_the_svd(noise):
+    """Where the noise asks for smoothing the SVD is taken; where it does not, the triangular solve gives the
+    plain fit, as the SVD does."""
+    rng, a, x_true = _weak_problem(3)
+    a[:, -5:] *= 10.0                                  # weak (1e-2) but well above the cut-off
+    b = a @ x_true + rng.normal(0.0, 0.05, (2000, 3))
+    prior = x_true + rng.normal(0.0, 0.01, x_true.shape)
+    fast = solve_tsvd(a, b, prior=prior, noise=noise, full_svd_up_to=0)
+    svd = solve_tsvd(a, b, prior=prior, noise=noise)
+    assert (fast.singular_values is None) == (svd.smoothing == 0.0)
+    assert fast.smoothing == svd.smoothing and fast.rank == svd.rank == 40
+    np.testing.assert_allclose(fast.x, svd.x, rtol=0, atol=1e-10 * np.abs(svd.x).max())
+
+
+def test_full_svd_up_to_must_not_be_negative():
+    with pytest.raises(ValueError, match="full_svd_up_to"):
+        solve_tsvd(np.eye(3), np.ones(3), full_svd_up_to=-1)

@@ -20,16 +20,22 @@ a pole the nodes do not determine moves with the field around it rather than sta
 
 A face may receive several hundred thousand FE nodes, so a tall ``A`` is never held densely: its rows are
 reduced block by block to the triangular factor of a QR decomposition (:func:`solve_tsvd`), and only that
-``(n, n)`` factor is decomposed by SVD.
+``(n, n)`` factor is decomposed by SVD.  Above :data:`FULL_SVD_UP_TO` unknowns even that SVD (``O(n^3)``: 40 s
+at ``n = 4752`` on one core) is taken only where it is needed: the largest and smallest singular values of the
+factor are found first by Lanczos iteration (:func:`_extremes`, ``O(n^2)`` a step), and where the smallest is
+clearly above the cut-off nothing is dropped and the solution is the triangular solve ``R x = Q^T B``, the same
+least-squares solution.
 """
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.lapack
 import scipy.sparse
+import scipy.sparse.linalg
 
 from ..settings import FLT_EPSILON
 
@@ -42,6 +48,15 @@ BLOCK_BYTES = 16 * 2 ** 20
 ROWS_PER_COLUMN = 4
 #: Fewest rows per block by default (a block of very short rows would make the loop over blocks dominate).
 MIN_BLOCK_ROWS = 1024
+#: Unknowns up to which the triangular factor is always decomposed by a full SVD; above, only where the
+#: extreme singular values (:func:`_extremes`) show that the cut-off drops some or that the noise smoothing
+#: needs the spectrum.
+FULL_SVD_UP_TO = 400
+#: Relative accuracy of the Lanczos estimates of the extreme singular values.
+LANCZOS_TOL = 1e-8
+#: A tall problem is taken as full rank without its SVD where the smallest singular value exceeds the cut-off by
+#: this factor (a margin far above the estimates' error): nearer the cut-off the SVD decides.
+FULL_RANK_MARGIN = 1.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +74,9 @@ class TsvdSolution:
     sigma_max, sigma_min : float, largest and smallest of all ``min(s, n)`` singular values, kept or not
         (``sigma_max / sigma_min`` is the condition number of ``A`` itself); 0.0 for an empty ``A``.
     cutoff : float, the threshold ``sigma_1 * n * epsilon``.
-    singular_values : (min(s, n),) float array, all singular values of ``A`` sorted from largest to smallest.
+    singular_values : (min(s, n),) float array, all singular values of ``A`` sorted from largest to smallest;
+        None where the full SVD was not taken (a tall, full-rank problem of more than ``full_svd_up_to``
+        unknowns, :func:`solve_tsvd`), whose extremes are ``sigma_max`` and ``sigma_min``.
     smoothing : float, the Tikhonov parameter ``lambda`` the data's noise chose (0: none; inf: the prior in
         every direction), see :func:`solve_tsvd`'s ``noise``.
     """
@@ -71,7 +88,7 @@ class TsvdSolution:
     sigma_max: float
     sigma_min: float
     cutoff: float
-    singular_values: np.ndarray
+    singular_values: np.ndarray | None
     smoothing: float = 0.0
 
     @property
@@ -192,7 +209,7 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
 
 def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,
                noisy_rows: int | None = None, block_rows: int | None = None,
-               block_bytes: int = BLOCK_BYTES) -> TsvdSolution:
+               block_bytes: int = BLOCK_BYTES, full_svd_up_to: int = FULL_SVD_UP_TO) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
 
     Parameters
@@ -223,6 +240,9 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
         ``block_bytes``.  It changes the rounding, not the result.
     block_bytes : int, memory budget of one dense block when ``block_rows`` is None.
+    full_svd_up_to : int >= 0, unknowns up to which a tall problem's triangular factor is always decomposed by a
+        full SVD; above, the SVD is skipped where the problem is clearly full rank and needs no smoothing (see
+        Method).  It changes the rounding, not the result.
 
     Returns
     -------
@@ -236,7 +256,10 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     then the SVD of the small ``R = U_R Sigma V^T`` is taken: since Q is orthogonal, ``A = (Q U_R) Sigma V^T``
     is an SVD of A with the same singular values, at the cost of an SVD of an n x n instead of an s x n
     matrix; ``U^T B = U_R^T C``.  For a square or wide ``A`` the SVD is taken directly.  Singular values
-    ``sigma_i <= cutoff`` are dropped.
+    ``sigma_i <= cutoff`` are dropped.  With more than ``full_svd_up_to`` unknowns, ``sigma_1`` and ``sigma_n``
+    of ``R`` are estimated first (:func:`_extremes`); where ``sigma_n > FULL_RANK_MARGIN * cutoff`` nothing
+    is dropped, and unless the noise asks for smoothing (the plain fit's residual ``||B||^2 - ||C||^2`` below
+    its target) ``x = R^-1 C``, the solution the SVD would give, by back substitution.
 
     Edge cases: ``n == 0`` gives an empty ``x`` (0, k); ``s == 0`` (no observations) gives ``x = 0`` with
     ``rank == 0``.  An all-zero ``A`` gives ``x = 0``, ``rank == 0``.
@@ -258,6 +281,8 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         raise ValueError(f"epsilon must be positive and finite, got {epsilon!r}")
     if block_rows is not None and block_rows < 1:
         raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
+    if full_svd_up_to < 0:
+        raise ValueError(f"full_svd_up_to must be a number of unknowns >= 0, got {full_svd_up_to!r}")
     if not np.all(np.isfinite(b)):
         raise ValueError(f"B {b.shape} holds NaN or inf")
     if prior is not None and not callable(prior):
@@ -276,6 +301,11 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     if s > n:
         rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
         rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
+        if n > full_svd_up_to:
+            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, noise > 0 and prior is not None,
+                              (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2)
+            if fast is not None:
+                return replace(fast, x=fast.x[:, 0] if vector else fast.x)
         ur, sigma, vt = _svd(rc[:, :n])
         utb = ur.T @ rc[:, n:]
     else:
@@ -304,6 +334,69 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
                         sigma_max=float(sigma[0]), sigma_min=float(sigma[-1]), cutoff=cutoff,
                         singular_values=sigma, smoothing=lam)
+
+
+def _extremes(r: np.ndarray) -> tuple[float, float]:
+    """``(sigma_1, sigma_n)``, the largest and smallest singular values of an upper triangular ``r`` (n, n)
+    with no zero on its diagonal, to a relative :data:`LANCZOS_TOL`: the largest eigenvalues of ``R^T R`` and
+    of ``R^-1 R^-T`` by Lanczos iteration (ARPACK, started from a fixed random vector, so that the result does
+    not change between runs), each step two products with ``R`` or two back substitutions, taken in band
+    storage (a B-spline fit's factor is a band of about ``p nv + q + 1`` diagonals, :func:`_triangular_factor`).
+    Ritz values bound the largest eigenvalue from below: ``sigma_1`` comes out at most its true value,
+    ``sigma_n`` at least."""
+    n = len(r)
+    nonzero = r != 0
+    width = int(np.max(n - 1 - np.argmax(nonzero[:, ::-1], axis=1) - np.arange(n)))      # last diagonal used
+    band = np.zeros((width + 1, n))                      # LAPACK's upper band storage: band[w + i - j, j]
+    for d in range(width + 1):
+        band[width - d, d:] = np.diagonal(r, d)
+    sparse_r = scipy.sparse.csr_array(r)
+    sparse_rt = sparse_r.T.tocsr()
+
+    def solve(v: np.ndarray, trans: str) -> np.ndarray:
+        x, info = scipy.linalg.lapack.dtbtrs(band, v.reshape(n, 1), uplo="U", trans=trans)
+        if info:
+            raise np.linalg.LinAlgError(f"dtbtrs info {info}")
+        return x[:, 0]
+
+    start = np.random.default_rng(0).standard_normal(n)
+    gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: sparse_rt @ (sparse_r @ v),
+                                              dtype=float)
+    inverse_gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: solve(solve(v, "T"), "N"),
+                                                      dtype=float)
+    top = scipy.sparse.linalg.eigsh(gram, k=1, which="LA", v0=start, tol=LANCZOS_TOL,
+                                    return_eigenvectors=False)[0]
+    bottom = scipy.sparse.linalg.eigsh(inverse_gram, k=1, which="LA", v0=start, tol=LANCZOS_TOL,
+                                       return_eigenvectors=False)[0]
+    return float(np.sqrt(top)), float(1.0 / np.sqrt(bottom))
+
+
+def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoothing: bool,
+               target: float) -> TsvdSolution | None:
+    """The solution ``R^-1 C`` (x ``(n, k)``) of the tall problem whose QR factors are ``r`` (n, n) and ``c``
+    (n, k) (right-hand side ``b`` (s, k)) where nothing falls below the cut-off, with a margin, and no smoothing
+    towards the prior is due (``smoothing`` asked for and the residual below ``target``); else None (the SVD
+    decides).  The diagonal bounds the singular values of a triangular matrix (``sigma_n <= min |r_ii|``,
+    ``sigma_1 >= max |r_ii|``), so a diagonal entry at or below ``max |r_ii| n epsilon`` is a dropped direction
+    without any iteration."""
+    n = len(r)
+    diagonal = np.abs(np.diag(r))
+    if diagonal.min() <= FULL_RANK_MARGIN * diagonal.max() * n * epsilon:
+        return None
+    if smoothing and max(float(np.sum(b * b) - np.sum(c * c)), 0.0) < target:
+        return None
+    try:
+        sigma_max, sigma_min = _extremes(r)
+    except (scipy.sparse.linalg.ArpackError, np.linalg.LinAlgError) as exc:      # the SVD decides
+        log.debug("Lanczos estimate of %d singular values failed (%s): full SVD", n, exc)
+        return None
+    cutoff = sigma_max * n * float(epsilon)
+    if not sigma_min > FULL_RANK_MARGIN * cutoff:
+        return None
+    x = scipy.linalg.solve_triangular(r, c, check_finite=False)
+    log.debug("%d unknowns of full rank (condition %.3g): solved without the SVD", n, sigma_max / sigma_min)
+    return TsvdSolution(x=x, rank=n, n_unknowns=n, condition=sigma_max / sigma_min, sigma_max=sigma_max,
+                        sigma_min=sigma_min, cutoff=cutoff, singular_values=None)
 
 
 def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, b: np.ndarray, target: float,
