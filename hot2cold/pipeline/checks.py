@@ -425,9 +425,66 @@ _SLACK_NODES = 8
 _FACE_ESTIMATE_MIN = 10
 
 
+class _FaceNodes:
+    """The nodes of one face, its edges and its vertices (``nodes`` (n,) classification rows), their foot
+    points' k-d tree, whether the face has ``_FACE_ESTIMATE_MIN`` nodes of its own (``own``), the field's
+    local estimate over the nodes (``local``) and its misses (mm) at them, the last two made as asked for."""
+
+    def __init__(self, part: Part, face, classification: Classification, field: DisplacementField, neighbours: int):
+        edges = {use.edge for use in face.uses}
+        vertices = {v for e in edges for v in part.edges[e].vertices}
+        self.nodes = np.concatenate([classification.nodes_of(Role.FACE, face.index)]
+                                    + [classification.nodes_of(Role.EDGE, e) for e in sorted(edges)]
+                                    + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
+        self.reach = GRID_REACH * classification.spacing(self.nodes)
+        self.tree = cKDTree(classification.foot[self.nodes]) if len(self.nodes) else None
+        self.own = len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN
+        self._foot = classification.foot[self.nodes]
+        self._displacements = field.displacements[self.nodes]
+        self._neighbours = neighbours
+        self._local = None
+        self._misses = np.full(len(self.nodes), np.nan)
+
+    @property
+    def local(self):
+        """The :class:`~hot2cold.pipeline.artificial.FieldEstimator` over the nodes (made when first asked)."""
+        if self._local is None:
+            from .artificial import FieldEstimator
+
+            self._local = FieldEstimator(self._foot, self._displacements, self._neighbours)
+        return self._local
+
+    def misses(self, asked: np.ndarray) -> np.ndarray:
+        """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``)."""
+        new = asked[np.isnan(self._misses[asked])]
+        if len(new):
+            self._misses[new] = np.linalg.norm(self.local(self._foot[new]) - self._displacements[new], axis=1)
+        return self._misses[asked]
+
+
+class FaceNodes:
+    """What :func:`face_grids` finds of each face's nodes, kept for one classification and field across its
+    calls: the refinement asks for the grids of a face again after every round, and the nodes, their tree, the
+    local estimate and its misses at the nodes do not depend on the face's knots (at 1 M nodes building them
+    again took most of each round's grids)."""
+
+    def __init__(self, classification: Classification, field: DisplacementField, neighbours: int):
+        self.classification = classification
+        self.field = field
+        self.neighbours = neighbours
+        self._faces: dict[int, _FaceNodes] = {}
+
+    def of(self, part: Part, face) -> _FaceNodes:
+        """The nodes of ``face`` of ``part`` (or of a refined ``part``: same faces, edges and vertices)."""
+        if face.index not in self._faces:
+            self._faces[face.index] = _FaceNodes(part, face, self.classification, self.field, self.neighbours)
+        return self._faces[face.index]
+
+
 def face_grids(part: Part, projector: Projector, classification: Classification, field: DisplacementField,
                estimator: Callable[[np.ndarray], np.ndarray], neighbours: int,
-               faces: list[int] | None = None, elements: ElementField | None = None) -> list[FaceGrid]:
+               faces: list[int] | None = None, elements: ElementField | None = None,
+               face_nodes: FaceNodes | None = None) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the
     part's diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs
     its own grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined
@@ -447,9 +504,11 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     model's boundary take the elements' own field instead, and all of them are near the nodes: the elements
     say where the part goes between them (the slack there: their distance off the boundary times the strain).
     The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
-    elevation keep the surface), so one set of grids serves it and the checks of the cold part."""
-    from .artificial import FieldEstimator
-
+    elevation keep the surface), so one set of grids serves it and the checks of the cold part.
+    ``face_nodes``: the faces' nodes and estimates kept from earlier calls with the same ``classification``,
+    ``field`` and ``neighbours`` (:class:`FaceNodes`; None: found anew)."""
+    if face_nodes is None:
+        face_nodes = FaceNodes(classification, field, neighbours)
     spacing = CHECK_SPACING * part.diagonal
     overall = GRID_REACH * classification.spacing()
     grids = []
@@ -459,26 +518,19 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
         node_distance = np.full(len(uv), np.inf)
         own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
-        edges = {use.edge for use in face.uses}
-        vertices = {v for e in edges for v in part.edges[e].vertices}
-        nodes = np.concatenate([classification.nodes_of(Role.FACE, face.index)]
-                               + [classification.nodes_of(Role.EDGE, e) for e in sorted(edges)]
-                               + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
-        reach = GRID_REACH * classification.spacing(nodes)
-        if len(uv) and len(nodes) and np.isfinite(reach):
-            tree = cKDTree(classification.foot[nodes])
-            node_distance = tree.query(hot)[0]
+        mine = face_nodes.of(part, face)
+        reach = mine.reach
+        if len(uv) and len(mine.nodes) and np.isfinite(reach):
+            node_distance = mine.tree.query(hot)[0]
             near = node_distance <= reach
-            if near.any() and len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN:
+            if near.any() and mine.own:
                 own = near
-                local = FieldEstimator(classification.foot[nodes], field.displacements[nodes], neighbours)
-                expected[near] += local(hot[near])
-                closest = tree.query(hot[near], k=min(_SLACK_NODES, len(nodes)))[1].reshape(int(near.sum()), -1)
+                expected[near] += mine.local(hot[near])
+                closest = mine.tree.query(hot[near], k=min(_SLACK_NODES, len(mine.nodes)))[1]
+                closest = closest.reshape(int(near.sum()), -1)
                 # the estimate's misses at those nodes only (a face's grid is sparser than its nodes)
                 asked, at = np.unique(closest, return_inverse=True)
-                misses = np.linalg.norm(local(classification.foot[nodes[asked]]) - field.displacements[nodes[asked]],
-                                        axis=1)
-                slack[near] = misses[at.reshape(closest.shape)].max(axis=1)
+                slack[near] = mine.misses(asked)[at.reshape(closest.shape)].max(axis=1)
         if (~own).any():
             expected[~own] += estimator(hot[~own])
         if elements is not None and len(uv):

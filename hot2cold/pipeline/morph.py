@@ -29,8 +29,8 @@ from scipy import sparse
 from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
-from .checks import (FaceGrid, FieldScale, check_cold, check_coverage, check_hot, check_result, edge_grids,
-                     face_grids)
+from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage, check_hot, check_result,
+                     edge_grids, face_grids)
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, morph_face, morph_faces
@@ -746,13 +746,15 @@ def _morph(hot, field, settings: Settings, units: str, field_name: str | None, i
     # the FE model's own field between its nodes, where it brings its elements and they were taken
     elements = (ElementField(fe_field.points, fe_field.triangles, fe_field.displacements, cls.node_distance,
                              scale.strain) if element_points_added else None)
+    face_nodes = FaceNodes(cls, field, settings.vertex_neighbours)      # kept for every round's grids
     grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours,
-                       elements=elements)
+                       elements=elements, face_nodes=face_nodes)
     estimator = context.estimator
 
     def regrid(part: Part, faces: list[int]) -> list[FaceGrid]:
         """The grids of ``faces`` of a refined ``part`` (the refinement's and G1's)."""
-        return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements)
+        return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements,
+                          face_nodes)
 
     refinements, edge_refinements = (), ()
     refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
