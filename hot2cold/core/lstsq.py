@@ -97,11 +97,16 @@ class TsvdSolution:
         return self.rank < self.n_unknowns
 
 
-def _svd(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Thin SVD; falls back from the divide-and-conquer driver to ``gesvd`` if the former fails."""
+def _svd(a: np.ndarray, overwrite: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin SVD; falls back from the divide-and-conquer driver to ``gesvd`` if the former fails.  With
+    ``overwrite`` the SVD may destroy ``a`` (no copy of it beside the SVD's workspace), and a failure of the
+    first driver raises LinAlgError, as ``a`` is gone."""
     try:
-        return scipy.linalg.svd(a, full_matrices=False, check_finite=False, lapack_driver="gesdd")
+        return scipy.linalg.svd(a, full_matrices=False, check_finite=False, lapack_driver="gesdd",
+                                overwrite_a=overwrite)
     except np.linalg.LinAlgError:
+        if overwrite:
+            raise
         return scipy.linalg.svd(a, full_matrices=False, check_finite=False, lapack_driver="gesvd")
 
 
@@ -306,8 +311,15 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
                               (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2)
             if fast is not None:
                 return replace(fast, x=fast.x[:, 0] if vector else fast.x)
-        ur, sigma, vt = _svd(rc[:, :n])
-        utb = ur.T @ rc[:, n:]
+        # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
+        # factors, and at n = 4752 a copy of R and the augmented factor beside it took 0.35 GB more
+        r, c = np.asfortranarray(rc[:, :n]), rc[:, n:].copy()
+        del rc
+        try:
+            ur, sigma, vt = _svd(r, overwrite=True)
+        except np.linalg.LinAlgError:                     # R once more for the slower driver
+            ur, sigma, vt = _svd(_triangular_factor(rows, b2, n, block_rows, block_bytes)[:, :n])
+        utb = ur.T @ c
     else:
         a = A.toarray() if scipy.sparse.issparse(A) else A
         a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
