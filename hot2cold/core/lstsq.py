@@ -20,11 +20,11 @@ a pole the nodes do not determine moves with the field around it rather than sta
 
 A face may receive several hundred thousand FE nodes, so a tall ``A`` is never held densely: its rows are
 reduced block by block to the triangular factor of a QR decomposition (:func:`solve_tsvd`), and only that
-``(n, n)`` factor is decomposed by SVD.  Above :data:`FULL_SVD_UP_TO` unknowns even that SVD (``O(n^3)``: 40 s
-at ``n = 4752`` on one core) is taken only where it is needed: the largest and smallest singular values of the
-factor are found first by Lanczos iteration (:func:`_extremes`, ``O(n^2)`` a step), and where the smallest is
-clearly above the cut-off nothing is dropped and the solution is the triangular solve ``R x = Q^T B``, the same
-least-squares solution.
+``(n, n)`` factor is decomposed by SVD.  Above :data:`FULL_SVD_UP_TO` unknowns even that SVD (``O(n^3)``,
+the largest cost of a refined face's fit) is taken only where it is needed: the largest and smallest singular
+values of the factor are found first by Lanczos iteration (:func:`_extremes`, ``O(n w)`` a step for a band of
+``w`` diagonals), and where the smallest is clearly above the cut-off nothing is dropped and the solution is the
+triangular solve ``R x = Q^T B``, the same least-squares solution.
 """
 from __future__ import annotations
 
@@ -312,7 +312,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
             if fast is not None:
                 return replace(fast, x=fast.x[:, 0] if vector else fast.x)
         # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
-        # factors, and at n = 4752 a copy of R and the augmented factor beside it took 0.35 GB more
+        # factors, and a copy of R and the augmented factor beside it would add 2 n^2 more
         r, c = np.asfortranarray(rc[:, :n]), rc[:, n:].copy()
         del rc
         try:

@@ -465,8 +465,7 @@ class _FaceNodes:
 class FaceNodes:
     """What :func:`face_grids` finds of each face's nodes, kept for one classification and field across its
     calls: the refinement asks for the grids of a face again after every round, and the nodes, their tree, the
-    local estimate and its misses at the nodes do not depend on the face's knots (at 1 M nodes building them
-    again took most of each round's grids)."""
+    local estimate and its misses at the nodes do not depend on the face's knots."""
 
     def __init__(self, classification: Classification, field: DisplacementField, neighbours: int):
         self.classification = classification
