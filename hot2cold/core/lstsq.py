@@ -320,6 +320,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         except np.linalg.LinAlgError:                     # R once more for the slower driver
             ur, sigma, vt = _svd(_triangular_factor(rows, b2, n, block_rows, block_bytes)[:, :n])
         utb = ur.T @ c
+        del ur, r, c                                      # (n, n) each: not held while the prior is solved
     else:
         a = A.toarray() if scipy.sparse.issparse(A) else A
         a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
@@ -327,6 +328,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
             raise ValueError(f"A {a.shape} holds NaN or inf")
         u, sigma, vt = _svd(a)
         utb = u.T @ b2
+        del u, a
 
     cutoff = float(sigma[0]) * n * float(epsilon)
     keep = sigma > cutoff

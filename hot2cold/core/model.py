@@ -249,7 +249,7 @@ class Classification:
         nearest = np.full(len(self.role), np.nan)
         feet = np.unique(self.foot[used], axis=0)
         if len(feet) > 1:
-            nearest[used] = cKDTree(feet).query(self.foot[used], k=2)[0][:, 1]
+            nearest[used] = cKDTree(feet).query(self.foot[used], k=2, workers=-1)[0][:, 1]
         return nearest
 
     def spacing(self, nodes: np.ndarray | None = None) -> float:

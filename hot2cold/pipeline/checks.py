@@ -303,7 +303,7 @@ class FieldScale:
         strain = 0.0
         if len(points) > 1:
             k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
-            d, j = cKDTree(points).query(points, k=k)
+            d, j = cKDTree(points).query(points, k=k, workers=-1)
             du = np.linalg.norm(disp[j[:, 1:]] - disp[:, None, :], axis=2)
             apart = d[:, 1:] > 0           # the rows of one node that feeds two solids are one point
             strain = float((du[apart] / d[:, 1:][apart]).max()) if apart.any() else 0.0
@@ -520,12 +520,12 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         mine = face_nodes.of(part, face)
         reach = mine.reach
         if len(uv) and len(mine.nodes) and np.isfinite(reach):
-            node_distance = mine.tree.query(hot)[0]
+            node_distance = mine.tree.query(hot, workers=-1)[0]
             near = node_distance <= reach
             if near.any() and mine.own:
                 own = near
                 expected[near] += mine.local(hot[near])
-                closest = mine.tree.query(hot[near], k=min(_SLACK_NODES, len(mine.nodes)))[1]
+                closest = mine.tree.query(hot[near], k=min(_SLACK_NODES, len(mine.nodes)), workers=-1)[1]
                 closest = closest.reshape(int(near.sum()), -1)
                 # the estimate's misses at those nodes only (a face's grid is sparser than its nodes)
                 asked, at = np.unique(closest, return_inverse=True)

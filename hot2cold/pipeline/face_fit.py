@@ -255,13 +255,15 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         basis.data *= np.repeat(weight, np.diff(basis.indptr))                      # rows weighted in place
         flat = delta.reshape(-1, 3)
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
+        design = basis[:, free]
+        del basis             # one design matrix held through the solve (a face's may hold millions of entries)
         if turn is not None:
             from scipy import sparse
 
             extra = sparse.csr_array(turn[0])
             rhs = np.vstack([rhs, turn[1] - extra[:, ~free] @ flat[~free]])
-            basis = sparse.vstack([basis, extra], format="csr")
-        sol = solve_tsvd(basis[:, free], rhs, settings.svd_epsilon,                   # eq. (19)-(20)
+            design = sparse.vstack([design, extra[:, free]], format="csr")
+        sol = solve_tsvd(design, rhs, settings.svd_epsilon,                           # eq. (19)-(20)
                          prior=lambda: _field_prior(surface, free, delta, estimator), noise=noise,
                          noisy_rows=len(nodes))
         flat[free] = sol.x
