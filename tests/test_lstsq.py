@@ -487,6 +487,15 @@ def test_noise_smoothing_is_the_same_without_the_svd(noise):
     np.testing.assert_allclose(fast.x, svd.x, rtol=0, atol=1e-10 * np.abs(svd.x).max())
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 33, 60])
+def test_the_fast_path_holds_for_any_number_of_unknowns(n):
+    # a few unknowns (singular values computed) and more than _DENSE_EXTREMES (Lanczos)
+    rng = np.random.default_rng(26 + n)
+    a = rng.normal(size=(4 * n + 10, n))
+    b = rng.normal(size=(4 * n + 10, 3))
+    _assert_matches_without_svd(solve_tsvd(a, b, full_svd_up_to=0), a, b)
+
+
 def test_full_svd_up_to_must_not_be_negative():
     with pytest.raises(ValueError, match="full_svd_up_to"):
         solve_tsvd(np.eye(3), np.ones(3), full_svd_up_to=-1)

@@ -57,6 +57,8 @@ LANCZOS_TOL = 1e-8
 #: A tall problem is taken as full rank without its SVD where the smallest singular value exceeds the cut-off by
 #: this factor (a margin far above the estimates' error): nearer the cut-off the SVD decides.
 FULL_RANK_MARGIN = 1.01
+#: Up to this many unknowns :func:`_extremes` takes all singular values (ARPACK needs more than k + 1 unknowns).
+_DENSE_EXTREMES = 32
 
 
 @dataclass(frozen=True, eq=False)
@@ -357,8 +359,11 @@ def _extremes(r: np.ndarray) -> tuple[float, float]:
     not change between runs), each step two products with ``R`` or two back substitutions, taken in band
     storage (a B-spline fit's factor is a band of about ``p nv + q + 1`` diagonals, :func:`_triangular_factor`).
     Ritz values bound the largest eigenvalue from below: ``sigma_1`` comes out at most its true value,
-    ``sigma_n`` at least."""
+    ``sigma_n`` at least.  Up to ``_DENSE_EXTREMES`` unknowns the singular values are simply computed."""
     n = len(r)
+    if n <= _DENSE_EXTREMES:
+        sigma = scipy.linalg.svdvals(r, check_finite=False)
+        return float(sigma[0]), float(sigma[-1])
     nonzero = r != 0
     width = int(np.max(n - 1 - np.argmax(nonzero[:, ::-1], axis=1) - np.arange(n)))      # last diagonal used
     band = np.zeros((width + 1, n))                      # LAPACK's upper band storage: band[w + i - j, j]

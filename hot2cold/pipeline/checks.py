@@ -30,7 +30,7 @@ from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
 from ..core.domain import Trim
-from ..core.model import Classification, Part, Role
+from ..core.model import Classification, Face, Part, Role
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
 from ..kernel.topology import broken_solid, solid_fault
@@ -430,7 +430,8 @@ class _FaceNodes:
     points' k-d tree, whether the face has ``_FACE_ESTIMATE_MIN`` nodes of its own (``own``), the field's
     local estimate over the nodes (``local``) and its misses (mm) at them, the last two made as asked for."""
 
-    def __init__(self, part: Part, face, classification: Classification, field: DisplacementField, neighbours: int):
+    def __init__(self, part: Part, face: Face, classification: Classification, field: DisplacementField,
+                 neighbours: int):
         edges = {use.edge for use in face.uses}
         vertices = {v for e in edges for v in part.edges[e].vertices}
         self.nodes = np.concatenate([classification.nodes_of(Role.FACE, face.index)]
@@ -473,7 +474,7 @@ class FaceNodes:
         self.neighbours = neighbours
         self._faces: dict[int, _FaceNodes] = {}
 
-    def of(self, part: Part, face) -> _FaceNodes:
+    def of(self, part: Part, face: Face) -> _FaceNodes:
         """The nodes of ``face`` of ``part`` (or of a refined ``part``: same faces, edges and vertices)."""
         if face.index not in self._faces:
             self._faces[face.index] = _FaceNodes(part, face, self.classification, self.field, self.neighbours)
