@@ -305,12 +305,13 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
             x = _checked_prior(prior, A.shape, b.shape).reshape(n, k).copy()
         return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
+    smoothing = noise > 0 and prior is not None
+    target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2   # the residual the noise leaves
     if s > n:
         rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
         rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
         if n > full_svd_up_to:
-            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, noise > 0 and prior is not None,
-                              (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2)
+            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, smoothing, target)
             if fast is not None:
                 return replace(fast, x=fast.x[:, 0] if vector else fast.x)
         # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
@@ -322,7 +323,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         except np.linalg.LinAlgError:                     # R once more for the slower driver
             ur, sigma, vt = _svd(_triangular_factor(rows, b2, n, block_rows, block_bytes)[:, :n])
         utb = ur.T @ c
-        del ur, r, c                                      # (n, n) each: not held while the prior is solved
+        del ur, r, c                                      # not held while the prior is solved
     else:
         a = A.toarray() if scipy.sparse.issparse(A) else A
         a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
@@ -336,8 +337,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     keep = sigma > cutoff
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
     lam = 0.0
-    if noise > 0 and prior is not None and rank:
-        target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2
+    if smoothing and rank:
         lam, x = _smoothed(sigma, rank, vt, utb, b2, target, lambda: _checked_prior(prior, A.shape, b.shape))
     else:
         x = None
@@ -402,7 +402,7 @@ def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoo
     diagonal = np.abs(np.diag(r))
     if diagonal.min() <= FULL_RANK_MARGIN * diagonal.max() * n * epsilon:
         return None
-    if smoothing and max(float(np.sum(b * b) - np.sum(c * c)), 0.0) < target:
+    if smoothing and _outside(b, c) < target:
         return None
     try:
         sigma_max, sigma_min = _extremes(r)
@@ -418,6 +418,13 @@ def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoo
                         sigma_min=sigma_min, cutoff=cutoff, singular_values=None)
 
 
+def _outside(b: np.ndarray, projected: np.ndarray) -> float:
+    """``||B||^2 - ||P||^2`` (at least 0) for the right-hand side ``b`` (s, k) and its coordinates ``projected``
+    in orthonormal columns whose span holds the range of ``A`` (``Q^T B``'s first n rows, or ``U^T B``): the
+    part of the residual outside them, which no ``x`` removes (all of it for a full-rank fit)."""
+    return max(float(np.sum(b * b) - np.sum(projected * projected)), 0.0)
+
+
 def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, b: np.ndarray, target: float,
               prior) -> tuple[float, np.ndarray | None]:
     """The Tikhonov solution towards ``prior() (n, k)`` whose residual is ``target``, and its ``lambda``:
@@ -429,7 +436,7 @@ def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, b: 
     directions (the prior in the dropped ones) leaves ``||B||^2 - ||U^T B||^2`` (outside the range of ``A``),
     the dropped ``c_i``, and ``(1 - f_i)^2 c_i^2`` with ``1 - f_i = lambda^2 / (sigma_i^2 + lambda^2)``:
     increasing in ``lambda``, solved for by bisection on its logarithm."""
-    outside = max(float(np.sum(b * b) - np.sum(utb * utb)), 0.0)
+    outside = _outside(b, utb)
     if outside + float(np.sum(utb[rank:] ** 2)) >= target:
         return 0.0, None
     x0 = prior().reshape(vt.shape[1], -1)
