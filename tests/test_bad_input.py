@@ -686,6 +686,34 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
         assert t.near.all() and t.slack.max() < 1e-9
 
 
+def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(box):
+    """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.checks.FaceNodes`, as the
+    refinement keeps them) give the grids found anew, point for point; kept for another field they are
+    refused rather than used."""
+    from hot2cold import morph
+    from hot2cold.io.field import DisplacementField
+    from hot2cold.kernel.project import Projector
+    from hot2cold.pipeline.artificial import FieldEstimator
+    from hot2cold.pipeline.checks import FaceNodes, face_grids
+
+    nodes = box[1]
+    result = morph(str(box[0]), (nodes, FIELD(nodes)))
+    part, cls, field = result.part, result.classification, result.field
+    estimator = FieldEstimator(cls.foot[cls.used], field.displacements[cls.used])
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    kept = FaceNodes(cls, field, 20)
+    anew = face_grids(part, projector, cls, field, estimator, 20)
+    for _ in range(2):                                   # building the kept nodes, then reusing them
+        again = face_grids(part, projector, cls, field, estimator, 20, face_nodes=kept)
+        for a, g in zip(anew, again):
+            np.testing.assert_array_equal(g.expected, a.expected)
+            np.testing.assert_array_equal(g.slack, a.slack)
+            np.testing.assert_array_equal(g.node_distance, a.node_distance)
+    other = DisplacementField(field.points, 2.0 * field.displacements)
+    with pytest.raises(ValueError, match="face_nodes were kept for another"):
+        face_grids(part, projector, cls, other, estimator, 20, face_nodes=kept)
+
+
 def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, capsys, monkeypatch):
     """A face more than twice the field's largest displacement from the field's local estimate somewhere on
     it is refused.  An honest morph of the box does not get there (the check guards against a fit gone

@@ -438,9 +438,9 @@ class _FaceNodes:
                                     + [classification.nodes_of(Role.EDGE, e) for e in sorted(edges)]
                                     + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
         self.reach = GRID_REACH * classification.spacing(self.nodes)
-        self.tree = cKDTree(classification.foot[self.nodes]) if len(self.nodes) else None
-        self.own = len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN
         self._foot = classification.foot[self.nodes]
+        self.tree = cKDTree(self._foot) if len(self.nodes) else None
+        self.own = len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN
         self._displacements = field.displacements[self.nodes]
         self._neighbours = neighbours
         self._local = None
@@ -509,6 +509,9 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     ``field`` and ``neighbours`` (:class:`FaceNodes`; None: found anew)."""
     if face_nodes is None:
         face_nodes = FaceNodes(classification, field, neighbours)
+    elif (face_nodes.classification is not classification or face_nodes.field is not field
+          or face_nodes.neighbours != neighbours):
+        raise ValueError("face_nodes were kept for another classification, field or neighbour count")
     spacing = CHECK_SPACING * part.diagonal
     overall = GRID_REACH * classification.spacing()
     grids = []
