@@ -213,7 +213,8 @@ def test_field_unreadable(tmp_path, box, out, capsys, monkeypatch):
     ("", r"field file .*f\.csv is empty; it needs a header line naming x,y,z,dx,dy,dz and one line per FE node$"),
     ("x,y,z,dx,dy\n1,2,3,4,5\n",
      r"field file .*f\.csv lacks column\(s\) dz \(header found: 'x', 'y', 'z', 'dx', 'dy', comma-separated\); the "
-     r"header must name the columns x,y,z,dx,dy,dz \(any order, any case\)$"),
+     r"header must name the columns x,y,z,dx,dy,dz \(any order, any case; ux,uy,uz, U1,U2,U3, 'X Location \(mm\)' "
+     r"and the like also do\), or map them with --columns x=NAME,\.\.\.,dz=NAME$"),
     ("x,y,z,dx,dy,dz\n",
      r"field file .*f\.csv has a header but no data lines; add one line per FE node \(x, y, z, dx, dy, dz\)$"),
     ("x,y,z,dx,dy,dz\n1,2,abc,0,0,0\n",

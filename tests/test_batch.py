@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -37,8 +38,10 @@ def fields(tmp_path_factory):
 
 @pytest.fixture
 def project(tmp_path, fields):
-    """A jobs folder: the hot blade, two fields, a folder for the cold parts."""
+    """A jobs folder: the hot blade, two fields, a field that fails when read (no dz), a folder for the cold
+    parts."""
     shutil.copy(SAMPLES / "twisted_blade.step", tmp_path / "hot.step")
+    (tmp_path / "bad.csv").write_text("x,y,z,dx,dy\n0,0,0,0,0\n")
     for path in fields:
         shutil.copy(path, tmp_path / path.name)
     (tmp_path / "cold").mkdir()
@@ -53,7 +56,7 @@ def _jobs_csv(folder, rows, header="name,hot,field,output,report"):
 
 THREE_JOBS = ["a,hot.step,op0.csv,cold/a.step,cold/a_report.json",
               "b,hot.step,op2.csv,cold/b.step,",
-              "c,hot.step,missing.csv,cold/c.step,"]
+              "c,hot.step,bad.csv,cold/c.step,"]
 
 
 def _valid_step(path):
@@ -77,7 +80,7 @@ def _check_two_ok_one_failed(project, data, by_name):
     assert json.loads((project / "cold" / "a_report.json").read_text())["valid"]
     failed = by_name["c"]
     assert failed["status"] == "failed" and failed["exit_code"] == 2
-    assert "missing.csv" in failed["message"] and "not found" in failed["message"]
+    assert "bad.csv" in failed["message"] and "lacks column(s) dz" in failed["message"]
     assert "\n" not in failed["message"]
     assert not (project / "cold" / "c.step").exists()
     assert not list(project.rglob("*.tmp"))
@@ -94,7 +97,7 @@ def test_pool_runs_skips_done_jobs_and_force_reruns(project, capsys, monkeypatch
     _check_two_ok_one_failed(project, data, by_name)
     assert data["workers"] == 2 or data["workers"] == min(3, batch.cores())
     assert "batch: 3/3" in err
-    assert "failed" in out and "missing.csv" in out and "Δmax" in out
+    assert "failed" in out and "bad.csv" in out and "Δmax" in out
 
     # Re-run: the done jobs are skipped, their files untouched; the failed one runs (and fails) again.
     stamps = {p: p.stat().st_mtime_ns for p in (project / "cold").iterdir()}
@@ -133,7 +136,7 @@ def test_dask_local_cluster_runs_a_toml_jobs_file(project, capsys):
     jobs.write_text('[defaults]\nhot = "hot.step"\nfield-units = "mm"\n\n'
                     '[[jobs]]\nname = "a"\nfield = "op0.csv"\noutput = "cold/a.step"\nreport = "cold/a_report.json"\n\n'
                     '[[jobs]]\nname = "b"\nfield = "op2.csv"\noutput = "cold/b.step"\n\n'
-                    '[[jobs]]\nname = "c"\nfield = "missing.csv"\noutput = "cold/c.step"\n')
+                    '[[jobs]]\nname = "c"\nfield = "bad.csv"\noutput = "cold/c.step"\n')
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                       dashboard_address=None) as cluster:
         start = time.perf_counter()
@@ -257,6 +260,23 @@ def test_stale_or_half_written_output_is_not_skipped(project):
     bad = replace(job, field=project / "missing.csv")
     assert batch.run_job(bad)["status"] == "failed" and not job.record.exists()
     assert batch.done_before(job) is None
+
+
+def test_missing_inputs_are_refused_before_any_job_runs(project, capsys):
+    """Issue 17: a jobs file naming an input that is not there is refused as a whole, at once (it was found only
+    when that job ran, after the others), naming the line; nothing is written."""
+    jobs = _jobs_csv(project, THREE_JOBS[:2] + ["c,hot.step,missing.csv,cold/c.step,"])
+    start = time.perf_counter()
+    assert main(["batch", str(jobs), "-q"]) == 2
+    assert time.perf_counter() - start < 5.0
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1, err
+    assert re.search(r"line 4: field file not found: .*missing\.csv; check the path$", err.strip()), err
+    assert not list((project / "cold").iterdir()) and not (project / "jobs_summary.json").exists()
+    points = _jobs_csv(project, ["a,hot.step,op0.csv,cold/a.step,"], header="name,hot,field,output,field_points")
+    points.write_text(points.read_text().rstrip("\n") + "nodes.bdf\n")
+    assert main(["batch", str(points), "-q"]) == 2
+    assert re.search(r"line 2: field points file not found: .*nodes\.bdf", capsys.readouterr().err)
 
 
 def _crash_or_quick(job):

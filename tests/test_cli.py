@@ -213,7 +213,8 @@ def test_the_parser_takes_the_options_of_the_table():
     options = MorphOptions.from_args(args)
     assert options == MorphOptions(field_units="m", tolerance=1e-3, max_refinements=2, extrapolate=True)
     assert MorphOptions.from_args(commands._parser().parse_args(["morph", "h", "f", "-o", "c"])) == MorphOptions()
-    assert options.morph_arguments() == {"units": "m", "field_name": None, "invert": False}
+    assert options.morph_arguments() == {"units": "m", "field_name": None, "field_step": None, "columns": None,
+                                         "field_points": None, "invert": False}
     settings = options.to_settings()
     assert (settings.tolerance, settings.max_refinements, settings.extrapolate) == (1e-3, 2, True)
 

@@ -371,9 +371,73 @@ def test_npz_bad_shape(tmp_path):
 
 
 def test_missing_columns(tmp_path):
-    msg = raises(write(tmp_path, "id,X,Y,Z,UX,UY,UZ\n1,0,0,0,0,0,0\n"), r"lacks column\(s\) dx, dy, dz")
-    assert "'UX', 'UY', 'UZ'" in msg and "'X'" in msg
-    assert "comma-separated" in msg
+    """Issue 17: ``UX, UY, UZ`` are displacements now (they were refused); a header naming none of the three is
+    still refused, with what it found and how to map the columns."""
+    msg = raises(write(tmp_path, "id,X,Y,Z,VX,VY,VZ\n1,0,0,0,0,0,0\n"), r"lacks column\(s\) dx, dy, dz")
+    assert "'VX', 'VY', 'VZ'" in msg and "'X'" in msg
+    assert "comma-separated" in msg and "--columns x=NAME" in msg
+
+
+@pytest.mark.parametrize("header, ids", [
+    ("id,X,Y,Z,UX,UY,UZ", True),                                   # the header this file's old test refused
+    ("Node Label,COORD1,COORD2,COORD3,U1,U2,U3", True),             # Abaqus report
+    ("Node Label,COORD.COOR1,COORD.COOR2,COORD.COOR3,U.U1,U.U2,U.U3", True),
+    ("node x y z u1 u2 u3", True),
+    ('"Points:0","Points:1","Points:2","U:0","U:1","U:2"', False),   # ParaView's CSV export
+    ("Node Number\tX Location (mm)\tY Location (mm)\tZ Location (mm)\tDirectional Deformation X (mm)\t"
+     "Directional Deformation Y (mm)\tDirectional Deformation Z (mm)", True),   # ANSYS Mechanical
+    ("nid;x [mm];y [mm];z [mm];disp_x;disp_y;disp_z", True),
+])
+def test_other_solvers_headers(tmp_path, header, ids):
+    delim = "\t" if "\t" in header else ";" if ";" in header else "," if "," in header else "  "
+    rows = [delim.join(str(v) for v in ([k + 7] if ids else []) + list(P[k]) + list(D[k])) for k in range(len(P))]
+    f = read_field(write(tmp_path, header + "\n" + "\n".join(rows) + "\n"))
+    np.testing.assert_array_equal(f.points, P)
+    np.testing.assert_array_equal(f.displacements, D)
+    if ids:
+        np.testing.assert_array_equal(f.node_ids, np.arange(len(P)) + 7)
+
+
+def test_units_stated_in_the_header(tmp_path):
+    """ANSYS writes ``X Location (m)``: the file's own unit is taken; a contradicting one given is refused."""
+    header = "X Location (m),Y Location (m),Z Location (m),UX (m),UY (m),UZ (m)\n"
+    path = write(tmp_path, header + "\n".join(",".join(map(str, np.r_[P[k], D[k]] / 1000)) for k in range(len(P))))
+    f = read_field(path)
+    np.testing.assert_allclose(f.points, P, rtol=1e-15)
+    np.testing.assert_allclose(f.displacements, D, rtol=1e-15)
+    np.testing.assert_allclose(read_field(path, units="m").points, P, rtol=1e-15)
+    msg = raises(path, r"states its points in m, but the field units were given as mm", units="mm")
+    assert "\n" not in msg
+    mixed = write(tmp_path, "x (mm),y (mm),z (mm),dx (um),dy (um),dz (um)\n1,2,3,4,5,6\n")
+    g = read_field(mixed)
+    np.testing.assert_allclose(g.points, [[1, 2, 3]])
+    np.testing.assert_allclose(g.displacements, [[4e-3, 5e-3, 6e-3]])
+    raises(write(tmp_path, "x (mm),y (m),z,dx,dy,dz\n1,2,3,4,5,6\n"), r"positions columns state different units")
+    raises(write(tmp_path, "x (deg),y,z,dx,dy,dz\n1,2,3,4,5,6\n"), r"column 'x \(deg\)' states the unit 'deg'")
+
+
+def test_columns_mapping(tmp_path):
+    """``--columns``: names the table does not know, and a choice between two it does."""
+    rows = "\n".join(",".join(map(str, np.r_[P[k], D[k], D[k] * 2])) for k in range(len(P)))
+    path = write(tmp_path, "px,py,pz,ux,uy,uz,dx,dy,dz\n" + rows + "\n")
+    raises(path, r"columns 'ux' and 'dx' both give dx; keep one, or choose with --columns dx=NAME")
+    f = read_field(path, columns="x=PX, y=py ,z=Pz,dx=dx,dy=dy,dz=dz")
+    np.testing.assert_array_equal(f.points, P)
+    np.testing.assert_array_equal(f.displacements, D * 2)
+    g = read_field(path, columns={"x": "px", "y": "py", "z": "pz", "dx": "ux", "dy": "uy", "dz": "uz"})
+    np.testing.assert_array_equal(g.displacements, D)
+    raises(path, r"--columns maps x to 'qx', which the header does not have", columns="x=qx,y=py,z=pz")
+    raises(path, r"columns unknown column key 'w'", columns="w=px")
+    raises(path, r"columns 'px' is no key=name pair", columns="px")
+    raises(path, r"columns column key 'x' is given twice", columns="x=px,x=py")
+    np.savez(tmp_path / "f.npz", points=P, displacements=D)
+    raises(tmp_path / "f.npz", r"columns applies to text tables only; .*f\.npz is read as npz", columns="x=px")
+
+
+def test_magnitude_only_is_refused_with_why(tmp_path):
+    msg = raises(write(tmp_path, "Node Number,X Location (mm),Y Location (mm),Z Location (mm),"
+                                 "Total Deformation (mm)\n1,0,0,0,0.1\n"), r"lacks column\(s\) dx, dy, dz")
+    assert "'Total Deformation (mm)' is the displacement's magnitude" in msg
 
 
 def test_no_header(tmp_path):
@@ -428,13 +492,20 @@ def test_wrong_number_of_fields(tmp_path, text, match):
     raises(write(tmp_path, text), match)
 
 
-@pytest.mark.parametrize("units", ["cm", "inch", "", None, 1000])
+@pytest.mark.parametrize("units", ["cm", "inch", "", 1000])
 def test_unknown_units(tmp_path, units):
     path = write(tmp_path, "x,y,z,dx,dy,dz\n1,2,3,4,5,6\n")
     msg = raises(path, "unknown units", units=units)
     assert "'mm', 'm'" in msg
     with pytest.raises(FieldError, match="unknown units"):
         as_field((P, D), units=units)
+
+
+def test_units_none_is_the_file_s_own_else_mm(tmp_path):
+    """Issue 17: ``units=None`` (the default since) takes the unit a file states, else mm (it was refused)."""
+    path = write(tmp_path, "x,y,z,dx,dy,dz\n1,2,3,4,5,6\n")
+    np.testing.assert_array_equal(read_field(path, units=None).points, [[1, 2, 3]])
+    np.testing.assert_array_equal(as_field((P, D), units=None).points, P)
 
 
 def test_bad_path_type():

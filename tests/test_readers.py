@@ -277,9 +277,12 @@ def test_frd_binary_refused(tmp_path):
 def test_frd_only_options(tmp_path):
     path = tmp_path / "f.csv"
     path.write_text("x,y,z,dx,dy,dz\n0,0,0,1,1,1\n")
-    with pytest.raises(FieldError, match=r"points_from and step apply to CalculiX \.frd files only"):
+    with pytest.raises(FieldError, match=r"step applies to solver results \(\.frd, \.rst, \.op2, \.pch\) only; "
+                                         r".*f\.csv is read as text"):
         read_field(path, step=0)
-    with pytest.raises(FieldError, match="field_name applies to .frd, .npz and mesh files"):
+    with pytest.raises(FieldError, match=r"points_from applies to \.frd, \.op2 and \.pch files only"):
+        read_field(path, points_from=path)
+    with pytest.raises(FieldError, match=r"field_name applies to \.frd, \.npz, solver result and mesh files"):
         read_field(path, field_name="U")
 
 

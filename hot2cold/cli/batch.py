@@ -35,6 +35,7 @@ from typing import Callable, Iterator
 
 from .. import __version__
 from ..errors import Hot2ColdError, InputError
+from ..io.inputs import check_input_file
 from .options import MorphOptions, to_path, to_text
 from .run import run_morph, tolerance_missed, write_cold, write_json
 from .workers import one_thread_each
@@ -74,6 +75,12 @@ class Job:
         """The files the job writes, as (what, path); the record comes last, as it is written last."""
         out = [("output", self.output)] + ([("report", self.report)] if self.report else [])
         return out + [("record", self.record)]
+
+    def inputs(self) -> list[tuple[str, Path]]:
+        """The files the job reads, as (what, path): the hot STEP, the field and where given the field's
+        node positions (``--field-points``)."""
+        points = self.options.field_points
+        return [("hot", self.hot), ("field", self.field)] + ([("field_points", Path(points))] if points else [])
 
 
 #: A job's own columns (CSV) or keys (TOML), before the morph options.
@@ -211,12 +218,20 @@ _CONVERT: dict[str, Callable] = {"name": to_text, "hot": to_path, "field": to_pa
                                  **{name: opt.convert for name, opt in MorphOptions.table().items()}}
 
 
+#: How each input of a job is named in messages (:func:`~hot2cold.io.inputs.check_input_file`'s words).
+_INPUT_WORDS = {"hot": "STEP file", "field": "field file", "field_points": "field points file"}
+
+
 def _check_jobs(path: Path, wheres: list[str], jobs: list[Job], summary) -> None:
     """Unique names; every file written by one job only and read by none; output folders present."""
     inputs = {path.resolve(): f"{path} (the jobs file)"}
     for where, job in zip(wheres, jobs):
-        for what in ("hot", "field"):
-            inputs.setdefault(getattr(job, what).resolve(), f"the {what} of {where}")
+        for what, given in job.inputs():
+            try:
+                check_input_file(given, _INPUT_WORDS[what])
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+            inputs.setdefault(given.resolve(), f"the {what} of {where}")
     written: dict[Path, str] = {}
     extra = [("--summary", None, Path(summary))] if summary is not None else []
     for where, what, out in [(w, what, p) for w, job in zip(wheres, jobs) for what, p in job.outputs()] + extra:
@@ -261,7 +276,7 @@ def _digest(path: Path, cache: dict | None = None) -> dict:
 def fingerprint(job: Job, cache: dict | None = None) -> dict:
     """What the job's cold part depends on: the contents of its inputs, its options, the hot2cold version.
     Paths are not part of it (a moved project folder keeps its runs).  Raises OSError for a missing input."""
-    return {"hot2cold": __version__, "hot": _digest(job.hot, cache), "field": _digest(job.field, cache),
+    return {"hot2cold": __version__, **{what: _digest(given, cache) for what, given in job.inputs()},
             "options": job.options.as_dict(), "report": job.report is not None}
 
 

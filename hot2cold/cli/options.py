@@ -135,12 +135,29 @@ class MorphOptions:
     :class:`~hot2cold.settings.Settings`).  Lengths in mm.  The fields' order is the order of ``--help``,
     of the jobs-file messages and of a batch record's ``options``."""
 
-    field_units: str = _option(
-        "mm", flag="--field-units", convert=to_units, type=str, choices=tuple(sorted(UNITS)),
-        help="length unit of the field file (default mm)")
+    field_units: str | None = _option(
+        None, flag="--field-units", convert=to_units, type=str, choices=tuple(sorted(UNITS)),
+        help="length unit of the field file (default: the unit the file states, as an ANSYS .rst or a column "
+        "'X Location (m)' does, else mm)")
     field_name: str | None = _option(
         None, flag="--field-name", convert=to_text, type=str, metavar="NAME",
-        help="displacement point field in a VTK/VTU file (default: U, displacement or DISP)")
+        help="which displacements to take: the point field of a VTK/VTU file (default: U, displacement or DISP), "
+        "the dataset of an .frd (DISP), the result set of an ANSYS .rst (LS,SUB) or the subcase of a Nastran "
+        ".op2/.pch (its id); default the last")
+    field_step: int | None = _option(
+        None, flag="--field-step", convert=to_count, type=int, metavar="N",
+        help="which result set of a solver results file (.frd, .rst, .op2, .pch), counting from 0 in file "
+        "order, negative from the end (default: the last)")
+    columns: str | None = _option(
+        None, flag="--columns", convert=to_text, type=str, metavar="MAP",
+        help="which columns of a text field hold what, e.g. 'x=X Location,y=Y Location,z=Z Location,dx=UX,"
+        "dy=UY,dz=UZ' (keys x y z dx dy dz id; names as in the header, any case); the others are found by their "
+        "usual names")
+    field_points: Path | None = _option(
+        None, flag="--field-points", convert=to_path, type=Path, metavar="FILE",
+        help="where the node positions of a results file without them come from (.pch; .op2 without geometry; "
+        ".frd for full precision): the model (.bdf, .dat, .inp) or a field file with node ids, matched by node "
+        "number")
     invert: bool = _option(
         False, flag="--invert", convert=to_flag,
         help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
@@ -224,9 +241,11 @@ class MorphOptions:
 
     def morph_arguments(self) -> dict:
         """The keyword arguments of :func:`~hot2cold.pipeline.morph.morph` that are not in the settings."""
-        return {"units": self.field_units, "field_name": self.field_name, "invert": self.invert}
+        return {"units": self.field_units, "field_name": self.field_name, "field_step": self.field_step,
+                "columns": self.columns, "field_points": self.field_points, "invert": self.invert}
 
     def as_dict(self) -> dict:
         """The options as JSON-ready values, in the table's order (a batch record's ``options``, hashed for
         skip-on-rerun: its keys and values must not change for the same options)."""
-        return {name: getattr(self, name) for name in self.names()}
+        return {name: str(value) if isinstance(value, Path) else value
+                for name, value in ((name, getattr(self, name)) for name in self.names())}

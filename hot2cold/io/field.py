@@ -63,6 +63,7 @@ import numpy as np
 
 from hot2cold.errors import FieldError
 
+from .columns import HINT, ID_COLUMNS, REQUIRED_COLUMNS, STATED_UNITS, assign, normalise, parse_mapping
 from .inputs import read_input_bytes
 
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
@@ -73,12 +74,6 @@ log = logging.getLogger(__name__)
 
 #: Length units a field may be given in, and the factor that takes them to millimetres.
 UNITS = {"mm": 1.0, "m": 1000.0}
-
-#: The columns a text field must name (case-insensitive, any order).
-REQUIRED_COLUMNS = ("x", "y", "z", "dx", "dy", "dz")
-
-#: Column names taken as FE node ids (case-insensitive).
-ID_COLUMNS = ("id", "node", "node_id", "nodeid", "nid", "node_number")
 
 #: Nodes closer than this times the diagonal of the field's bounding box are at the same position.
 DUPLICATE_RTOL = 1e-9
@@ -251,25 +246,32 @@ def _renumbered(triangles: np.ndarray | None, rows: np.ndarray, n: int) -> np.nd
 # --------------------------------------------------------------------------------------------------------
 # Public entry points
 # --------------------------------------------------------------------------------------------------------
-def read_field(path, units: str = "mm", field_name: str | None = None, *, points_from=None,
-               step: int | None = None) -> DisplacementField:
-    """Read a displacement field from a text table, ``.npz``, CalculiX ``.frd`` or mesh file, in millimetres.
+def read_field(path, units: str | None = None, field_name: str | None = None, *, points_from=None,
+               step: int | None = None, columns=None) -> DisplacementField:
+    """Read a displacement field from a text table, ``.npz``, solver result or mesh file, in millimetres.
 
     Parameters
     ----------
     path : str or os.PathLike
         The field file (see the module documentation for the formats; dispatched by extension, then content).
-    units : str
-        ``"mm"`` (default) or ``"m"``: the length unit of the file; the result is in mm.
+    units : str or None
+        ``"mm"`` or ``"m"``: the length unit of the file; the result is in mm.  None (default): the unit the
+        file states (an ANSYS ``.rst``'s unit system, a text table's ``X Location (m)``), else mm.  A unit
+        given that contradicts the file's is refused.
     field_name : str or None
         Which displacement data to take: the point field of a mesh file, the dataset of an ``.frd``
-        (default ``DISP``), the array of an ``.npz`` (default ``displacements``).  Not for text tables.
+        (default ``DISP``), the array of an ``.npz`` (default ``displacements``), the result set of an ANSYS
+        ``.rst`` or the subcase of a Nastran ``.op2``/``.pch``.  Not for text tables.
     points_from : TetMesh, DisplacementField, path or None
-        ``.frd`` only: where to take the node positions from, matched by node number (see the module
-        documentation).  ``None``: the ``.frd``'s own, rounded coordinates.
+        ``.frd``, ``.op2`` and ``.pch`` only: where to take the node positions from, matched by node number
+        (see the module documentation).  ``None``: the file's own (an ``.frd``'s are rounded; a ``.pch`` has
+        none).
     step : int or None
-        ``.frd`` only: which displacement block, counting from 0 in file order (negative from the end);
+        Solver results only: which result set, counting from 0 in file order (negative from the end);
         ``None``: the last.
+    columns : str, mapping or None
+        Text tables only: which columns hold what, ``"x=X Location,dx=UX"`` or ``{"x": "X Location", ...}``
+        (:func:`hot2cold.io.columns.parse_mapping`); the others are found by their usual names.
 
     Raises
     ------
@@ -277,9 +279,16 @@ def read_field(path, units: str = "mm", field_name: str | None = None, *, points
         The file is missing or unreadable, or its content is malformed, truncated, empty or not finite, or
         lacks the displacement data.
     """
-    factor = _unit_factor(units)
+    if units is not None:
+        _unit_factor(units)
     if field_name is not None and (not isinstance(field_name, str) or not field_name.strip()):
         raise FieldError(f"field_name must be a non-empty string or None, got {field_name!r}")
+    mapping = None
+    if columns is not None:
+        try:
+            mapping = parse_mapping(columns)
+        except ValueError as exc:
+            raise FieldError(f"columns {exc}") from None
     try:
         fspath = os.fspath(path)
     except TypeError:
@@ -289,46 +298,78 @@ def read_field(path, units: str = "mm", field_name: str | None = None, *, points
     fspath = os.path.expanduser(fspath)
     raw = read_input_bytes(fspath, "field file", FieldError)
     kind = _kind(fspath, raw)
-    if kind != "frd" and (points_from is not None or step is not None):
-        raise FieldError(
-            f"points_from and step apply to CalculiX .frd files only; {fspath} is read as {kind}")
+    for given, name, kinds in ((points_from, "points_from", _POSITIONLESS), (step, "step", _SOLVER_KINDS),
+                               (mapping, "columns", ("text",))):
+        if given is not None and kind.partition(":")[0] not in kinds:
+            raise FieldError(f"{name} applies to {_KIND_NAMES[kinds]} only; {fspath} is read as {kind}")
+    stated = {}
     if kind == "npz":
         field = _parse_npz(fspath, field_name)
     elif kind == "frd":
         field = _parse_frd(raw, fspath, field_name, step, points_from)
+    elif kind in ("rst", "op2", "pch"):
+        field, unit = _parse_solver(kind, fspath, field_name, step, points_from)
+        stated = {"points": unit, "displacements": unit}
     elif kind.startswith("meshio"):
         field = _parse_meshio(fspath, kind.partition(":")[2] or None, field_name)
     else:
         if field_name is not None:
             raise FieldError(
-                f"field_name applies to .frd, .npz and mesh files; the text table {fspath} needs the columns "
-                f"{','.join(REQUIRED_COLUMNS)}")
-        field = _parse_text(raw, fspath)
-    if factor != 1.0:
-        field = field.scaled(factor)
+                f"field_name applies to .frd, .npz, solver result and mesh files; the text table {fspath} needs "
+                f"the columns {','.join(REQUIRED_COLUMNS)} (or --columns)")
+        field, stated = _parse_text(raw, fspath, mapping)
+    field = _in_mm(field, units, stated, fspath)
     log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind.partition(":")[0],
-             units.strip().lower())
+             units or next((u for u in stated.values() if u), "mm"))
     return merge_duplicates(field)
 
 
-def as_field(field, units: str = "mm", field_name: str | None = None) -> DisplacementField:
+def _in_mm(field: DisplacementField, units: str | None, stated: dict[str, str | None], path: str
+           ) -> DisplacementField:
+    """``field`` scaled to mm: by the units the file ``stated`` (``{"points": unit, "displacements": unit}``,
+    a group that states none takes the other's), else by ``units`` (None: mm).  ``units`` given and different
+    from a stated one raises."""
+    said = {k: u for k, u in stated.items() if u}
+    if units is not None:
+        for what, unit in said.items():
+            if STATED_UNITS[unit] != _unit_factor(units):
+                raise FieldError(f"field file {path} states its {what} in {unit}, but the field units were "
+                                 f"given as {units.strip().lower()}: drop --field-units (units=) to take the "
+                                 f"file's, or fix the file")
+        factor = _unit_factor(units)
+        return field if factor == 1.0 else field.scaled(factor)
+    if not said:
+        return field
+    fp = STATED_UNITS[said.get("points", said.get("displacements"))]
+    fd = STATED_UNITS[said.get("displacements", said.get("points"))]
+    if fp == fd == 1.0:
+        return field
+    log.info("field file %s states its lengths in %s; scaled to mm", path, ", ".join(sorted(set(said.values()))))
+    return DisplacementField(field.points * fp, field.displacements * fd, field.node_ids, field.source,
+                             field.triangles)
+
+
+def as_field(field, units: str | None = None, field_name: str | None = None, *, step: int | None = None,
+             columns=None, points_from=None) -> DisplacementField:
     """Turn what a user passed into a :class:`DisplacementField` in millimetres.
 
     Accepts a :class:`DisplacementField` (returned as it is unless it has duplicate nodes, see
-    :func:`merge_duplicates`; it is already in mm, so ``units`` must be ``"mm"``), a path (``str`` or
-    ``os.PathLike``; see :func:`read_field`, which gets ``field_name``), or a pair ``(points,
-    displacements)`` of (N, 3) array-likes in ``units``.  Duplicate nodes are merged or refused
-    (:func:`merge_duplicates`).
+    :func:`merge_duplicates`; it is already in mm, so ``units`` must be ``"mm"`` or None), a path (``str`` or
+    ``os.PathLike``; see :func:`read_field`, which gets ``units``, ``field_name``, ``step``, ``columns`` and
+    ``points_from``), or a pair ``(points, displacements)`` of (N, 3) array-likes in ``units`` (None: mm).
+    Duplicate nodes are merged or refused (:func:`merge_duplicates`).
     """
-    factor = _unit_factor(units)
+    if isinstance(field, (str, bytes, os.PathLike)):
+        return read_field(field, units, field_name, step=step, columns=columns, points_from=points_from)
+    if (step, columns, points_from) != (None, None, None):
+        raise FieldError("step, columns and points_from apply to a field file, not to a field given as arrays")
+    factor = 1.0 if units is None else _unit_factor(units)
     if isinstance(field, DisplacementField):
         if factor != 1.0:
             raise FieldError(
                 f"a DisplacementField is already in mm, so units={units!r} cannot apply to it; "
                 f"use field.scaled(...) or pass units='mm'")
         return merge_duplicates(field)
-    if isinstance(field, (str, bytes, os.PathLike)):
-        return read_field(field, units, field_name)
     if isinstance(field, (tuple, list)) and len(field) == 2:
         points, displacements = field
         result = DisplacementField(points, displacements, source="arrays")
@@ -460,14 +501,25 @@ _MESHIO_EXTENSIONS = (".vtu", ".vtk", ".vtp", ".xdmf", ".xmf", ".msh", ".med", "
 DISPLACEMENT_NAMES = ("u", "displacement", "displacements", "disp")
 
 
+#: Solver result files by extension: ANSYS Mechanical APDL results, Nastran OP2 and punch.
+_SOLVER_EXTENSIONS = {".rst": "rst", ".rth": "rst", ".op2": "op2", ".pch": "pch", ".punch": "pch"}
+#: The kinds that take a result set (``step``) and those whose positions may come from elsewhere.
+_SOLVER_KINDS = ("frd", "rst", "op2", "pch")
+_POSITIONLESS = ("frd", "op2", "pch")
+_KIND_NAMES = {_SOLVER_KINDS: "solver results (.frd, .rst, .op2, .pch)", _POSITIONLESS: ".frd, .op2 and .pch files",
+               ("text",): "text tables"}
+
+
 def _kind(path: str, raw: bytes) -> str:
-    """How to read the file: ``npz``, ``frd``, ``meshio[:format]`` or ``text``."""
+    """How to read the file: ``npz``, ``frd``, ``rst``, ``op2``, ``pch``, ``meshio[:format]`` or ``text``."""
     if raw.startswith(_NPZ_MAGIC):
         return "npz"
     name = path.lower()
     ext = os.path.splitext(name)[1]
     if ext == ".frd":
         return "frd"
+    if ext in _SOLVER_EXTENSIONS:
+        return _SOLVER_EXTENSIONS[ext]
     if ext in _TEXT_EXTENSIONS:
         return "text"
     head = raw[:512].lstrip(b"\xef\xbb\xbf")
@@ -505,12 +557,14 @@ def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from)
                              triangles=result.triangles)
 
 
-def match_points(source, ids: np.ndarray, rounded: np.ndarray, path: str = "the results") -> np.ndarray:
-    """Full-precision positions ``(N, 3)`` of the nodes ``ids (N,)`` of an ``.frd`` from ``source``.
+def match_points(source, ids: np.ndarray, rounded: np.ndarray | None, path: str = "the results") -> np.ndarray:
+    """Full-precision positions ``(N, 3)`` of the nodes ``ids (N,)`` of an ``.frd`` (or a result file without
+    positions) from ``source``.
 
     ``source`` is a :class:`~hot2cold.fe.mesh.TetMesh` (anything with ``nodes`` and ``node_tags``), a
     :class:`DisplacementField` with node ids, or a field file with node ids.  The positions must agree
-    with the ``.frd``'s 6-digit ``rounded`` ones ``(N, 3)`` to within that rounding, else FieldError.
+    with the ``.frd``'s 6-digit ``rounded`` ones ``(N, 3)`` to within that rounding, else FieldError;
+    ``rounded`` None: nothing to compare with.
     """
     if hasattr(source, "nodes") and hasattr(source, "node_tags"):  # a TetMesh
         src_ids, src_pts, what = np.asarray(source.node_tags), np.asarray(source.nodes), "the mesh"
@@ -539,6 +593,8 @@ def match_points(source, ids: np.ndarray, rounded: np.ndarray, path: str = "the 
             f"{int(missing.sum())} node(s) of {path} (first: node {int(ids[missing][0])}) are not in points_from "
             f"({what}); pass the mesh the results were computed on")
     points = src_pts[order[pos]]
+    if rounded is None:
+        return points
     # The .frd rounds to 6 significant digits (E12.5): half a unit of the 6th digit, and some slack.
     tol = 1e-5 * np.maximum(np.abs(rounded), np.abs(rounded).max() * 1e-6) + 1e-12
     off = np.abs(points - rounded) > tol
@@ -550,6 +606,27 @@ def match_points(source, ids: np.ndarray, rounded: np.ndarray, path: str = "the 
             f"{tuple(float(v) for v in rounded[k])} in the results ({int(off.any(axis=1).sum())} node(s) differ); "
             f"pass the mesh the results were computed on, in the same length unit")
     return points
+
+
+def _parse_solver(kind: str, path: str, field_name: str | None, step: int | None, points_from
+                  ) -> tuple[DisplacementField, str | None]:
+    """The field of an ANSYS ``.rst`` (:mod:`hot2cold.io.ansys`) or a Nastran ``.op2``/``.pch``
+    (:mod:`hot2cold.io.nastran`) in the file's length unit, and that unit where the file states it."""
+    if kind == "rst":
+        from .ansys import read_rst as read
+    else:
+        from .nastran import read_op2, read_punch
+        read = read_op2 if kind == "op2" else read_punch
+    result = read(path, field_name, step)
+    log.info("%s: result set %s (of %s)", path, result.name, ", ".join(result.available))
+    points = result.points
+    if points_from is not None:
+        points = match_points(points_from, result.node_ids, None, path)
+    elif points is None:
+        raise FieldError(f"{path} holds no node positions; pass the model they belong to (--field-points "
+                         f"model.bdf, points_from=) to take them by node number")
+    return (DisplacementField(points, result.displacements, result.node_ids, source=path,
+                              triangles=getattr(result, "triangles", None)), getattr(result, "unit", None))
 
 
 def _parse_meshio(path: str, file_format: str | None, field_name: str | None) -> DisplacementField:
@@ -737,7 +814,8 @@ def _delimiter(header: str) -> str | None:
 
 
 def _delim_name(delim: str | None) -> str:
-    return {",": "comma-separated", ";": "semicolon-separated", None: "whitespace-separated"}[delim]
+    return {",": "comma-separated", ";": "semicolon-separated", "\t": "tab-separated",
+            None: "whitespace-separated"}[delim]
 
 
 def _n(count: int, noun: str) -> str:
@@ -749,15 +827,21 @@ def _short(text: str, n: int = 60) -> str:
     return text if len(text) <= n else text[: n - 3] + "..."
 
 
-_HINT = "the header must name the columns " + ",".join(REQUIRED_COLUMNS) + " (any order, any case)"
-
-
 def _names(header: str, delim: str | None) -> list[str]:
-    """Normalised column names: lower case, no quotes, inner spaces and dashes as ``_``."""
-    return [re.sub(r"[\s-]+", "_", n.lower()) for n in _split(header, delim)]
+    """Normalised column names (:func:`hot2cold.io.columns.normalise`)."""
+    return [normalise(n)[0] for n in _split(header, delim)]
 
 
-def _find_header(lines: list[str], path: str) -> tuple[int, str, list[str], str | None]:
+def _fits(shown: list[str], path: str, mapping) -> bool:
+    """Whether the header names ``shown`` give every column (:func:`hot2cold.io.columns.assign`)."""
+    try:
+        assign(shown, path, mapping)
+    except FieldError:
+        return False
+    return True
+
+
+def _find_header(lines: list[str], path: str, mapping) -> tuple[int, str, list[str], str | None]:
     """(index of the first data line, header text, normalised column names, delimiter)."""
     for h, line in enumerate(lines):
         content = line.partition("#")[0].strip()
@@ -765,8 +849,10 @@ def _find_header(lines: list[str], path: str) -> tuple[int, str, list[str], str 
             break
     else:
         raise FieldError(
-            f"field file {path} has no header and no data; {_HINT}, followed by one line per FE node")
+            f"field file {path} has no header and no data; {HINT}, followed by one line per FE node")
     delim = _delimiter(content)
+    if delim is None and "\t" in content and not _fits(_split(content, None), path, mapping):
+        delim = "\t"          # tab-separated names with spaces in them (ANSYS Mechanical's "X Location (mm)")
     names = _names(content, delim)
     if not all(_is_number(n) for n in _split(content, delim)):
         return h + 1, content, names, delim
@@ -777,40 +863,28 @@ def _find_header(lines: list[str], path: str) -> tuple[int, str, list[str], str 
             continue
         text = text.lstrip("#").strip()
         cdelim = _delimiter(text)
-        cnames = _names(text, cdelim)
-        if set(REQUIRED_COLUMNS) <= set(cnames):
-            return h, text, cnames, cdelim
-        break
+        if not _fits(_split(text, cdelim), path, mapping):
+            break
+        return h, text, _names(text, cdelim), cdelim
     raise FieldError(
         f"field file {path} has no header line: line {h + 1} ({_short(content)!r}) holds numbers; "
         f"add a first line naming the columns, e.g. {','.join(REQUIRED_COLUMNS)}")
 
 
-def _parse_text(raw: bytes, path: str) -> DisplacementField:
+def _parse_text(raw: bytes, path: str, mapping=None) -> tuple[DisplacementField, dict[str, str | None]]:
+    """The field of a text table in the length units its header states, and those units (``{"points": unit,
+    "displacements": unit}``, None where it states none); ``mapping`` names columns
+    (:func:`hot2cold.io.columns.parse_mapping`)."""
     text = _decode(raw, path)
     if not text.strip():
         raise FieldError(
             f"field file {path} is empty; it needs a header line naming {','.join(REQUIRED_COLUMNS)} "
             f"and one line per FE node")
     lines = text.splitlines()
-    start, header, names, delim = _find_header(lines, path)
+    start, header, names, delim = _find_header(lines, path, mapping)
     shown = _split(header, delim)  # the names as written, for messages
-
-    # Columns.
-    seen = {}
-    for i, n in enumerate(names):
-        if n in seen and (n in REQUIRED_COLUMNS or n in ID_COLUMNS):
-            raise FieldError(
-                f"field file {path}: column {n!r} appears twice in the header; keep one of them")
-        seen.setdefault(n, i)
-    missing = [c for c in REQUIRED_COLUMNS if c not in seen]
-    if missing:
-        found = ", ".join(repr(n) for n in shown)
-        raise FieldError(
-            f"field file {path} lacks column(s) {', '.join(missing)} (header found: {found}, "
-            f"{_delim_name(delim)}); {_HINT}")
-    cols = [seen[c] for c in REQUIRED_COLUMNS]
-    id_col = next((i for i, n in enumerate(names) if n in ID_COLUMNS), None)
+    found = assign(shown, path, mapping, _delim_name(delim))
+    cols, id_col = list(found.cols), found.id_col
     ncols = len(names)
 
     # Data lines: comments cut, blank lines dropped; line numbers kept for messages.
@@ -828,8 +902,8 @@ def _parse_text(raw: bytes, path: str) -> DisplacementField:
         raise FieldError(
             f"field file {path} has a header but no data lines; add one line per FE node "
             f"({', '.join(shown)})")
-    if delim == ";":
-        data = [ln.replace(",", ".") for ln in data]  # decimal comma, as Excel writes it in many locales
+    if delim in (";", "\t"):
+        data = [ln.replace(",", ".") for ln in data]  # decimal comma, as Excel and ANSYS write it in many locales
 
     # Numbers, by numpy's C parser; if it fails, a line-by-line pass names the first bad line.  When every
     # column is needed, loadtxt itself insists on the same number of fields on every line; otherwise the
@@ -885,7 +959,8 @@ def _parse_text(raw: bytes, path: str) -> DisplacementField:
     elif id_col is not None:
         log.warning("field file %s: column %r is not numeric; node ids ignored", path, shown[id_col])
 
-    return DisplacementField(values[:, :3], values[:, 3:], node_ids, source=path)
+    field = DisplacementField(values[:, :3], values[:, 3:], node_ids, source=path)
+    return field, {"points": found.point_unit, "displacements": found.displacement_unit}
 
 
 def _check_field_counts(data, lineno, delim, ncols, path) -> None:

@@ -543,8 +543,9 @@ class _Stages:
             self._progress(stage, done, total)
 
 
-def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", field_name: str | None = None,
-          invert: bool = False, progress: Progress | None = None, check: bool = True) -> MorphResult:
+def morph(hot, field, settings: Settings | None = None, *, units: str | None = None, field_name: str | None = None,
+          field_step: int | None = None, columns=None, field_points=None, invert: bool = False,
+          progress: Progress | None = None, check: bool = True) -> MorphResult:
     """Morph the hot part with an FE displacement field into the cold part.
 
     Parameters
@@ -554,8 +555,12 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
     settings : tolerances (default :class:`Settings()`).  With ``settings.blas_threads`` set, the BLAS
         library is held to that many threads while the morph runs, for the whole process.
-    units : length unit of ``field`` when it is read or given as arrays ("mm" or "m").
-    field_name : name of the displacement point field in a VTK/VTU (or other meshio) file.
+    units : length unit of ``field`` when it is read or given as arrays ("mm" or "m"); None: the unit the file
+        states, else mm.
+    field_name, field_step, columns, field_points : which data of a field file to take
+        (:func:`~hot2cold.io.field.read_field`'s ``field_name``, ``step``, ``columns`` and ``points_from``):
+        the displacement dataset or result set by name or number, a text table's columns, where the node
+        positions of a result file without them come from.
     invert : the field goes cold to hot (given at the nodes of the hot mesh); it is inverted by fixed-point
         iteration first (:mod:`hot2cold.pipeline.invert`) and the iteration's residual is reported.
     progress : optional callback ``progress(stage, done, total)``.
@@ -571,7 +576,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str = "mm", fi
     settings = settings or Settings()
     limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
     with limit:
-        result = _morph(hot, field, settings, units, field_name, invert, progress)
+        result = _morph(hot, field, settings, dict(units=units, field_name=field_name, step=field_step,
+                                                   columns=columns, points_from=field_points), invert, progress)
     if check:
         check_result(result)
     return result
@@ -694,11 +700,10 @@ def _classified(part, field: DisplacementField, settings: Settings, projector: P
     return cls, field, noise
 
 
-def _morph(hot, field, settings: Settings, units: str, field_name: str | None, invert: bool,
-           progress: Progress | None) -> MorphResult:
-    """:func:`morph` within its BLAS thread limit, unchecked."""
+def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress: Progress | None) -> MorphResult:
+    """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords."""
     stages = _Stages(progress)
-    field = as_field(field, units, field_name)
+    field = as_field(field, **reading)
     inversion = None
     if invert:
         field, inversion = invert_field(field)
