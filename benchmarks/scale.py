@@ -191,7 +191,7 @@ def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37") -> dict:
     t = result.report.timings
     out = {
         "blade": blade, "nodes": len(result.field.points),
-        "load": t["load"], "classify": t["classify"], "fit": t["edges"] + t["faces"],
+        "load": t["read"] + t["load"], "classify": t["classify"], "fit": t["edges"] + t["faces"],
         "refine": t.get("refine", 0.0), "g1": t.get("g1", 0.0) + t.get("g2", 0.0),
         "rebuild_sew": t["rebuild"] + t["sew"], "report": t["report"], "write": write,
         "total": total + write, "peak_mb": peak_mb(),

@@ -596,7 +596,8 @@ def test_interrupt_while_the_step_is_written(box, out, capsys, monkeypatch, with
 
 
 #: ``python -m hot2cold`` whose classification first waits a minute: the box's whole morph after its load takes
-#: about 2 s, and on a loaded machine a SIGINT sent on the "load" line once came after it had finished (exit 0).
+#: about 2 s, and on a loaded machine a SIGINT sent on the "load" line once came after it had finished (exit 0); it
+#: is sent once "classify ..." is printed.
 _SLOW_CLASSIFY = """
 import runpy, time
 import hot2cold.pipeline.morph as morph
@@ -620,8 +621,8 @@ def test_ctrl_c_in_a_running_morph(tmp_path, box):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        line = proc.stderr.readline()                # "load: done": the morph is under way
-        assert line.startswith("load"), line
+        lines = [proc.stderr.readline() for _ in range(5)]     # "read ...", ..., "classify ...": under way
+        assert lines[-1].startswith("classify ..."), lines
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)
     finally:

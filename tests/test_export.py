@@ -4,6 +4,7 @@ from __future__ import annotations
 import errno
 import io
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -155,8 +156,13 @@ def test_cli_writes_every_export_with_progress_and_table(tmp_path, block_step, b
     assert all(f"wrote {p}" in captured.out for p in written)
     assert "Δmax" in captured.out and "valid, closed" in captured.out          # the table
     err = captured.err.splitlines()
-    assert err[:4] == ["load: done", "classify: done", "edges: done", "faces: 18/18"]
-    assert err[-2:] == ["sew: done", "report: done"] and not any("INFO" in line for line in err)
+    assert err[:3] == ["read ...", err[1], "load ..."] and re.fullmatch(r"read: done in \d+\.\d s", err[1])
+    assert "classify ..." in err and any(re.fullmatch(r"classify: 4161/4161 done in \d+\.\d s", e) for e in err)
+    faces = [e for e in err if e.startswith("faces")]     # issue 17: counts as they go, then the time
+    assert faces[0] == "faces ..." and "faces: 2/18" in faces and len(faces) >= 8
+    assert re.fullmatch(r"faces: 18/18 done in \d+\.\d s", faces[-1])
+    assert err[-2] == "report ..." and re.fullmatch(r"report: \d+/\d+ done in \d+\.\d s", err[-1])
+    assert not any("INFO" in line for line in err)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["cold.step", "nodes_surface.vtu", *out])
     nodes = meshio.read(out["nodes.vtu"])
     assert len(nodes.points) == 4161 and np.nanmax(nodes.point_data["error"]) < 1e-9
@@ -295,8 +301,12 @@ def test_progress_rewrites_one_line_on_a_terminal():
 
     tty, pipe = Terminal(), io.StringIO()
     for stream in (tty, pipe):
-        progress = _Progress(stream)
-        for call in (("load", 1, 1), ("faces", 1, 3), ("faces", 3, 3), ("report", 1, 1)):
+        clock = iter([0.0, 0.5, 1.0, 1.1, 1.2, 2.0, 3.0, 3.25])
+        progress = _Progress(stream, clock=lambda: next(clock))
+        for call in (("load", 0, 1), ("load", 1, 1), ("faces", 0, 30), ("faces", 3, 30), ("faces", 4, 30),
+                     ("faces", 30, 30), ("report", 0, 1), ("report", 1, 1)):
             progress(*call)
-    assert tty.getvalue() == ("\r\033[Kload: done\r\033[Kfaces: 1/3\r\033[Kfaces: 3/3\r\033[Kreport: done\n")
-    assert pipe.getvalue() == "load: done\nfaces: 3/3\nreport: done\n"
+    assert tty.getvalue() == ("\r\033[Kload ...\r\033[Kload: done in 0.5 s\r\033[Kfaces ...\r\033[Kfaces: 3/30"
+                              "\r\033[Kfaces: 30/30 done in 1.0 s\r\033[Kreport ...\r\033[Kreport: done in 0.2 s\n")
+    assert pipe.getvalue() == ("load ...\nload: done in 0.5 s\nfaces ...\nfaces: 3/30\nfaces: 30/30 done in 1.0 s\n"
+                               "report ...\nreport: done in 0.2 s\n")

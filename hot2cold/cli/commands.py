@@ -90,19 +90,37 @@ def _parser() -> argparse.ArgumentParser:
 
 
 class _Progress:
-    """Stage-by-stage progress on stderr (a single rewritten line on a terminal)."""
+    """Stage-by-stage progress on stderr: when a stage begins, its count as it goes (at each tenth) and its
+    time when it ends.  A terminal gets one rewritten line; a pipe a line for each."""
 
-    def __init__(self, stream):
+    def __init__(self, stream, clock=time.perf_counter):
         self.stream = stream
         self.tty = stream.isatty()
+        self.clock = clock
+        self.started: dict[str, float] = {}
+        self.shown: tuple[str, int] = ("", 0)
 
     def __call__(self, stage: str, done: int, total: int) -> None:
-        text = f"{stage}: {done}/{total}" if total > 1 else f"{stage}: done"
+        now = self.clock()
+        if done <= 0:
+            self.started[stage] = now
+            self.shown = (stage, 0)
+            self._write(f"{stage} ...")
+            return
+        spent = now - self.started.get(stage, now)
+        if done >= total:
+            count = f"{total}/{total} " if total > 1 else ""
+            self._write(f"{stage}: {count}done in {spent:.1f} s", final=stage == "report")
+            return
+        tenth = done * 10 // total
+        if (stage, tenth) != self.shown:
+            self.shown = (stage, tenth)
+            self._write(f"{stage}: {done}/{total}")
+
+    def _write(self, text: str, final: bool = False) -> None:
         if self.tty:
-            self.stream.write(f"\r\033[K{text}")
-            if stage == "report":
-                self.stream.write("\n")
-        elif total == 1 or done == total:
+            self.stream.write(f"\r\033[K{text}" + ("\n" if final else ""))
+        else:
             self.stream.write(text + "\n")
         self.stream.flush()
 
@@ -200,6 +218,8 @@ def _write_exports(args, result):
     if args.glb:
         yield export.write_glb(result, args.glb, surface)
     if args.html:
+        if not args.quiet:
+            print(f"writing {args.html} ...", file=sys.stderr, flush=True)
         _html_writer()(result, args.html, scale=args.scale)   # atomic itself; OutputError on failure
         yield args.html
 
@@ -211,6 +231,8 @@ def _morph(args) -> int:
 
     check_input_file(args.hot, "STEP file")            # refused before anything is loaded
     check_input_file(args.field, "field file")
+    if args.field_points is not None:
+        check_input_file(args.field_points, "field points file")
     _check_outputs(args)
     _check_options(args)
     if args.html:

@@ -557,17 +557,27 @@ def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from)
                              triangles=result.triangles)
 
 
+#: Nastran bulk data (input decks), whose GRID cards give node positions (``points_from``).
+_BULK_DATA = (".bdf", ".dat", ".nas", ".blk", ".bulk")
+
+
 def match_points(source, ids: np.ndarray, rounded: np.ndarray | None, path: str = "the results") -> np.ndarray:
     """Full-precision positions ``(N, 3)`` of the nodes ``ids (N,)`` of an ``.frd`` (or a result file without
     positions) from ``source``.
 
     ``source`` is a :class:`~hot2cold.fe.mesh.TetMesh` (anything with ``nodes`` and ``node_tags``), a
-    :class:`DisplacementField` with node ids, or a field file with node ids.  The positions must agree
+    :class:`DisplacementField` with node ids, a Nastran input deck (``.bdf``, ``.dat``, ``.nas``: its GRID
+    cards, :func:`hot2cold.io.nastran.read_bdf_grids`) or a field file with node ids.  The positions must agree
     with the ``.frd``'s 6-digit ``rounded`` ones ``(N, 3)`` to within that rounding, else FieldError;
     ``rounded`` None: nothing to compare with.
     """
     if hasattr(source, "nodes") and hasattr(source, "node_tags"):  # a TetMesh
         src_ids, src_pts, what = np.asarray(source.node_tags), np.asarray(source.nodes), "the mesh"
+    elif isinstance(source, (str, os.PathLike)) and os.path.splitext(os.fspath(source))[1].lower() in _BULK_DATA:
+        from .nastran import read_bdf_grids
+
+        src_ids, src_pts = read_bdf_grids(os.fspath(source))
+        what = os.fspath(source)
     else:
         if isinstance(source, (str, bytes, os.PathLike)):
             source = read_field(source)
@@ -618,7 +628,7 @@ def _parse_solver(kind: str, path: str, field_name: str | None, step: int | None
         from .nastran import read_op2, read_punch
         read = read_op2 if kind == "op2" else read_punch
     result = read(path, field_name, step)
-    log.info("%s: result set %s (of %s)", path, result.name, ", ".join(result.available))
+    log.info("%s: result set %s (of %d: %s)", path, result.name, len(result.available), "; ".join(result.available))
     points = result.points
     if points_from is not None:
         points = match_points(points_from, result.node_ids, None, path)

@@ -524,12 +524,25 @@ class MorphContext:
 
 
 class _Stages:
-    """The wall time (s) of each stage of a morph, logged, and the caller's progress callback."""
+    """The wall time (s) of each stage of a morph, logged, and the caller's progress callback: ``(stage, 0,
+    total)`` when a stage begins, ``(stage, done, total)`` as it goes, ``(stage, total, total)`` when it ends."""
 
     def __init__(self, progress: Progress | None):
         self.timings: dict[str, float] = {}
         self._progress = progress
         self._clock = time.perf_counter()
+        self._total = 1
+
+    def begin(self, stage: str, total: int = 1) -> None:
+        """``stage`` begins (its time runs from the last lap)."""
+        self._total = max(int(total), 1)
+        self.progress(stage, 0, self._total)
+
+    def count(self, stage: str, done: int, total: int) -> None:
+        """``done`` of ``total`` items of ``stage`` are done (the end is :meth:`lap`'s to say)."""
+        self._total = max(int(total), 1)
+        if done < total:
+            self.progress(stage, done, total)
 
     def lap(self, stage: str) -> None:
         """Close ``stage``: the time since the last lap is its time."""
@@ -537,6 +550,8 @@ class _Stages:
         self.timings[stage] = round(now - self._clock, 4)
         self._clock = now
         log.info("%s done in %.2f s", stage, self.timings[stage])
+        self.progress(stage, self._total, self._total)
+        self._total = 1
 
     def progress(self, stage: str, done: int = 1, total: int = 1) -> None:
         if self._progress is not None:
@@ -703,20 +718,24 @@ def _classified(part, field: DisplacementField, settings: Settings, projector: P
 def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress: Progress | None) -> MorphResult:
     """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords."""
     stages = _Stages(progress)
+    stages.begin("read")
     field = as_field(field, **reading)
+    stages.lap("read")
     inversion = None
     if invert:
+        stages.begin("invert")
         field, inversion = invert_field(field)
         stages.lap("invert")
 
     # load (METHOD step 1): the hot part in B-spline form, a closed solid
+    stages.begin("load")
     part = load_part(hot, settings)
     hot_checks = check_solids(part.kernel.hot)
     check_hot(part, hot_checks)
     stages.lap("load")
-    stages.progress("load")
 
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
+    stages.begin("classify", len(field))
     projector = Projector(part.kernel.faces, part.kernel.edges)
     cls, classified, noise = _classified(part, field, settings, projector)
     element_points_added = 0
@@ -732,17 +751,17 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
         log.info("the field scatters by %.3g mm about a smooth field (per component): the fits are smoothed "
                  "and the tolerance at the nodes is widened by %.3g mm", noise, allowance)
     stages.lap("classify")
-    stages.progress("classify")
 
     # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
     context = MorphContext.of(part, cls, field, settings, projector, scale.strain,
                               smoothing_noise(noise, settings))
+    stages.begin("edges", len(part.edges))
     edge_morphs, corners = context.fit_edges()
     stages.lap("edges")
-    stages.progress("edges")
 
     # faces (steps 4-5, eq. 23-39): boundary rows from the edges, interior by truncated SVD
-    face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.progress("faces", done, total))
+    stages.begin("faces", len(part.faces))
+    face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.count("faces", done, total))
     stages.lap("faces")
 
     # refinement to the tolerance (beyond the paper; not with keep_knots): knots and cubic degree where the
@@ -764,6 +783,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     refinements, edge_refinements = (), ()
     refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
     if settings.tolerance is not None and not settings.keep_knots:
+        stages.begin("refine")
         targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, grids,
                              edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
@@ -779,11 +799,13 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     # refined along the edges their nets cannot bring to 0.01 deg (beyond the paper; with the refinement)
     g1_reports = ()
     if context.tangent:
+        stages.begin("g1", len(context.tangent))
         shortest = refined_spans * targets.face_spacing if refined_spans else None
         context, grids, edge_morphs, face_morphs, g1_reports = _g1(context, edge_morphs, face_morphs, corners,
                                                                    grids, shortest, regrid)
         stages.lap("g1")
         # G2 (the paper's outlook): the curvature jumps across them measured, and removed if asked
+        stages.begin("g2")
         face_morphs, g1_reports = context.correct_g2(face_morphs, g1_reports, grids, edge_morphs)
         stages.lap("g2")
     fits = Fits(face_morphs, edge_morphs, tuple(refinements), tuple(edge_refinements), tuple(g1_reports))
@@ -791,18 +813,21 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     # rebuild, sew and check: the cold geometry in a copy of the kernel shape, tolerances fitted to its gaps
     part = context.part
     cold_vertices = part.vertices + context.vertex_displacements
+    stages.begin("rebuild")
     cold = rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
     stages.lap("rebuild")
+    stages.begin("sew")
     gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
+    stages.begin("check")
     cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, grids)
     problems = cold_check.problems
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
-    stages.progress("sew")
 
     # report (step 8, eq. 21-22): each node's cold target projected onto the morphed geometry
+    stages.begin("report", len(cls.used))
     errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
                          [f.surface for f in face_morphs], [e.curve for e in edge_morphs])
     stages.lap("report")
@@ -812,7 +837,6 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
                           scatter=noise, allowance=allowance, element_points=element_points_added)
-    stages.progress("report")
     if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
         log.info("not measured: %s", report.unsupported_text())
     result = MorphResult(report=report, part=part, classification=cls, faces=face_morphs, edges=edge_morphs,
