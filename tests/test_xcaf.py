@@ -130,6 +130,22 @@ def test_report_names_each_solid(cli_run):
     assert "solid 0 'blade': valid, closed" in table and "solid 1 'block': valid, closed" in table
 
 
+def test_report_names_each_face(cli_run):
+    """Issue 17: faces are named in the table and the JSON: by the STEP's name where it gives one, else by their
+    surface kind and place (the blade's aerofoil faces are B-splines between planes at z = 0 and 100, the
+    block's faces planes 5, 10 and 15 mm from its centre at x = 60)."""
+    code, table, _, report = cli_run
+    names = [f["name"] for f in report["faces"]]
+    assert names[1] == "blade_face1" and names[6] == "block_face0" and names[9] == "block_face3"
+    assert all(n.startswith("B-spline surface near (") for n in (names[0], names[2], names[3]))
+    assert names[4:6] == ["plane z = 0", "plane z = 100"]                  # the blade's root and tip
+    planes = {n for k, n in enumerate(names[6:], 6) if k not in (6, 9)}
+    assert planes <= {"plane x = 55", "plane x = 65", "plane y = -10", "plane y = 10", "plane z = -15",
+                      "plane z = 15"} and len(planes) == 4, names
+    rows = [line.split() for line in table.splitlines()[1:13]]
+    assert [" ".join(r[5:]) for r in rows] == names
+
+
 def test_solid_and_face_order_kept(cli_run, assembly):
     _, _, cold, report = cli_run
     hot = decompose(read_step(assembly[0]))

@@ -94,6 +94,8 @@ class Part:
     solid_names : tuple of str, the name of each solid as the hot STEP gave it ("" where it gave none);
         empty when the input carried no names.
     face_names : tuple of str, the same per face (a face's own label only).
+    face_labels : tuple of str, a name for each face from its surface kind and place as read ("plane z = 10",
+        "cylinder r 5 about z", "B-spline surface near (1, 2, 3)"), for reports; empty when not known.
     styles : opaque record of the hot STEP's names, colours and assembly tree
         (:class:`hot2cold.kernel.xcaf.Styles`), or None; the cold STEP is written with them.
     """
@@ -106,7 +108,13 @@ class Part:
     kernel: Any
     solid_names: tuple[str, ...] = ()
     face_names: tuple[str, ...] = ()
+    face_labels: tuple[str, ...] = ()
     styles: Any = None
+
+    def face_title(self, k: int) -> str:
+        """What face ``k`` is called in reports: its name in the STEP file, else its label ("" if neither)."""
+        named = self.face_names[k] if k < len(self.face_names) else ""
+        return named or (self.face_labels[k] if k < len(self.face_labels) else "")
 
 
 class Side(str, Enum):

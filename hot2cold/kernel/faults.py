@@ -3,13 +3,14 @@
 :func:`solid_faults` lists the faces of a solid that ``BRepCheck_Analyzer`` refuses (with their surface
 type, a point on them and the statuses BRepCheck gives the face, its wires, edges and vertices), or the
 solid's own statuses (e.g. an unorientable shell) when no face is at fault; :func:`describe_face` names one
-face for a message.  Used on the hot part as read (a broken input) and on the part after B-spline
+face for a message, :func:`face_label` for a report.  Used on the hot part as read (a broken input) and on the part after B-spline
 conversion (a conversion that broke it).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 from OCP.BRepAdaptor import BRepAdaptor_Surface
 from OCP.BRepCheck import BRepCheck_Analyzer, BRepCheck_NoError
 from OCP.BRepTools import BRepTools
@@ -34,6 +35,43 @@ def face_point(face) -> tuple[float, float, float]:
         return (p.X(), p.Y(), p.Z())
     except Exception:  # Standard_Failure on a face without a usable surface
         return (float("nan"),) * 3
+
+
+#: Words for the surface kinds of :func:`surface_type` in a face's label.
+_KIND_WORDS = {"Plane": "plane", "Cylinder": "cylinder", "Cone": "cone", "Sphere": "sphere", "Torus": "torus",
+               "BezierSurface": "Bezier surface", "BSplineSurface": "B-spline surface",
+               "SurfaceOfRevolution": "surface of revolution", "SurfaceOfExtrusion": "extruded surface",
+               "OffsetSurface": "offset surface"}
+
+
+def _axis_name(direction) -> str | None:
+    """"x", "y" or "z" when the gp_Dir ``direction`` lies along that axis (either way), else None."""
+    d = np.array([direction.X(), direction.Y(), direction.Z()])
+    k = int(np.argmax(np.abs(d)))
+    return "xyz"[k] if abs(d[k]) > 1.0 - 1e-9 else None
+
+
+def face_label(face) -> str:
+    """A name for ``face`` from its surface kind and place, for a part whose STEP names none: "plane z = 10",
+    "cylinder r 5 about z", "B-spline surface near (1, 2, 3)" (lengths in mm, 4 significant digits)."""
+    kind = surface_type(face)
+    word = _KIND_WORDS.get(kind, "surface")
+    try:
+        adaptor = BRepAdaptor_Surface(face)
+        if kind == "Plane":
+            plane = adaptor.Plane()
+            axis = _axis_name(plane.Axis().Direction())
+            if axis is not None:
+                at = plane.Location()
+                return f"plane {axis} = {getattr(at, axis.upper())():.4g}"
+        elif kind in ("Cylinder", "Sphere", "Torus"):
+            shape = getattr(adaptor, kind)()
+            radius = shape.MajorRadius() if kind == "Torus" else shape.Radius()
+            axis = None if kind == "Sphere" else _axis_name(shape.Axis().Direction())
+            return f"{word} r {radius:.4g}" + (f" about {axis}" if axis else "")
+    except Exception:  # Standard_Failure: the near point below still names it
+        pass
+    return f"{word} near ({', '.join(f'{x:.4g}' for x in face_point(face))})"
 
 
 def describe_face(face, index: int) -> str:

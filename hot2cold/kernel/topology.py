@@ -34,7 +34,7 @@ from OCP.gp import gp_Vec2d
 from ..errors import InputError, KernelError
 from ..core.model import Edge, EdgeUse, Face, Part
 from .convert import curve_to_record, surface_to_record
-from .faults import describe_face, solid_faults
+from .faults import describe_face, face_label, solid_faults
 
 log = logging.getLogger(__name__)
 
@@ -427,5 +427,7 @@ def decompose(shape: TopoDS_Shape, samples_per_span: int = 4) -> Part:
                         hot_edges=shape_map(hot, TopAbs_EDGE))
     log.info("decomposed %d solid(s): %d faces, %d edges, %d vertices",
              len(solids), len(faces), len(edges), len(vertices))
+    source_faces = shape_map(shape, TopAbs_FACE)       # as read: its planes are planes yet
+    labels = tuple(face_label(f) for f in source_faces) if len(source_faces) == len(faces) else ()
     return Part(faces=face_list, edges=edge_list, vertices=vertex_points, solids=solid_faces,
-                diagonal=diagonal(shape), kernel=kernel)
+                diagonal=diagonal(shape), kernel=kernel, face_labels=labels)

@@ -36,7 +36,8 @@ class FaceReport:
     share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings (theirs or all nodes',
     the larger: ``FaceGrid.support``) from the nodes of the face, its edges and vertices, where nothing
     measures the face (its shape there comes from its edges and the field's estimate), and
-    ``farthest_node`` the largest such distance (mm); NaN where not checked."""
+    ``farthest_node`` the largest such distance (mm); NaN where not checked.  ``name``: the face's name in the hot
+    STEP, else one from its surface kind and place (:meth:`~hot2cold.core.model.Part.face_title`)."""
 
     index: int
     solid: int
@@ -53,6 +54,7 @@ class FaceReport:
     delta_between: float = float("nan")
     unsupported: float = float("nan")
     farthest_node: float = float("nan")
+    name: str = ""
 
 
 #: A face is named as not told by its nodes when more than this share of its grid lies out of their reach.
@@ -209,10 +211,10 @@ class Report:
 
     def table(self) -> str:
         """A short text table: per face as the paper's Table 1, then the overall checks."""
-        lines = [f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}"]
+        lines = [f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}  name"]
         for f in self.faces:
             lines.append(f"{f.index:>5} {f.nodes:>9} {f.control_points:>15} {_num(f.delta_max):>10} "
-                         f"{_num(f.delta_mean):>10}")
+                         f"{_num(f.delta_mean):>10}  {f.name}".rstrip())
         edge_max = max((e.delta_max for e in self.edges if not math.isnan(e.delta_max)), default=float("nan"))
         gap = max((e.gap for e in self.edges), default=0.0)
         lines.append(f"edges: {len(self.edges)}, Δmax {_num(edge_max)} mm, largest edge-face gap {_num(gap)} mm")
@@ -394,7 +396,7 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
                                  (float(checks.unsupported[fm.index]), float(checks.farthest_node[fm.index])))
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
-                                fm.artificial, between, unsupported, farthest))
+                                fm.artificial, between, unsupported, farthest, part.face_title(fm.index)))
     edges = []
     for em in fits.edges:
         d = errors[cls.nodes_of(Role.EDGE, em.index)]
