@@ -621,7 +621,7 @@ def test_ctrl_c_in_a_running_morph(tmp_path, box):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        lines = [proc.stderr.readline() for _ in range(5)]     # "read ...", ..., "classify ...": under way
+        lines = [proc.stderr.readline() for _ in range(4)]     # "read: done ...", ..., "classify ...": under way
         assert lines[-1].startswith("classify ..."), lines
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=120)

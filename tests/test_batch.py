@@ -11,10 +11,12 @@ import sys
 import time
 from dataclasses import replace
 
+import meshio
 import pytest
 
 from hot2cold.cli import batch, main
 from hot2cold.cli.workers import ONE_THREAD
+from hot2cold.io.field import read_field
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 
@@ -260,6 +262,29 @@ def test_stale_or_half_written_output_is_not_skipped(project):
     bad = replace(job, field=project / "missing.csv")
     assert batch.run_job(bad)["status"] == "failed" and not job.record.exists()
     assert batch.done_before(job) is None
+
+
+def test_a_job_writes_its_viewer_files(project, capsys):
+    """Issue 17: a job's ``html``, ``vtu`` and ``stl`` columns write those files as ``hot2cold morph``'s flags
+    do; the record vouches for them, so a rerun skips the job until one of them is gone."""
+    jobs = _jobs_csv(project, ["a,hot.step,op0.csv,cold/a.step,cold/a.html,cold/a.vtu,cold/a.stl"],
+                     header="name,hot,field,output,html,vtu,stl")
+    assert main(["batch", str(jobs), "-q", "--workers", "1"]) == 0
+    cold = project / "cold"
+    assert sorted(p.name for p in cold.iterdir()) == ["a.html", "a.step", "a.step.hot2cold.json", "a.stl", "a.vtu",
+                                                       "a_surface.vtu"]
+    assert "<html" in (cold / "a.html").read_text()[:200].lower()
+    assert len(meshio.read(cold / "a.vtu").points) == len(read_field(project / "op0.csv"))
+    record = json.loads((cold / "a.step.hot2cold.json").read_text())
+    assert set(record["outputs"]) == {"output", "html", "vtu", "vtu surface", "stl"}
+    assert main(["batch", str(jobs), "-q"]) == 0
+    assert _summary(project / "jobs_summary.json")[1]["a"]["status"] == "skipped"
+    (cold / "a_surface.vtu").unlink()
+    assert main(["batch", str(jobs), "-q", "--workers", "1"]) == 0
+    assert _summary(project / "jobs_summary.json")[1]["a"]["status"] == "ok" and (cold / "a_surface.vtu").is_file()
+    same = _jobs_csv(project, ["a,hot.step,op0.csv,cold/a.step,cold/a.step"], header="name,hot,field,output,stl")
+    assert main(["batch", str(same), "-q"]) == 2
+    assert "every output needs its own path" in capsys.readouterr().err
 
 
 def test_missing_inputs_are_refused_before_any_job_runs(project, capsys):

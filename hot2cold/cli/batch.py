@@ -2,8 +2,9 @@
 
 A jobs file is CSV (a header, then one row per job) or TOML (``[[jobs]]`` tables and an optional
 ``[defaults]`` table that every job starts from).  Each job names ``hot`` (STEP), ``field`` and ``output``
-(the cold STEP), and may give a ``report`` (JSON), a ``name`` for the summary (default: the output path
-as written) and the options of ``hot2cold morph`` (:class:`~hot2cold.cli.options.MorphOptions`:
+(the cold STEP), and may give a ``report`` (JSON), viewer files (``vtu``, ``stl``, ``glb``, ``html``, as
+``hot2cold morph``'s flags of those names), a ``name`` for the summary (default: the output path as written)
+and the options of ``hot2cold morph`` (:class:`~hot2cold.cli.options.MorphOptions`:
 ``field_units``, ``tolerance``...).  Relative paths are relative to the jobs file's folder; option names
 may be written with ``-`` or ``_``.
 
@@ -12,7 +13,7 @@ process pool or on a Dask cluster and yields one result dict per job (:func:`run
 runs: the morph, report, check and cold STEP of :mod:`hot2cold.cli.run`, as ``hot2cold morph``).  A job
 whose cold STEP exists with a record beside it (``<output>.hot2cold.json``, written after the STEP) stating
 the same inputs (SHA-256 of the hot STEP and the field, the options, the hot2cold version) and the same
-outputs (size and SHA-256 of the STEP and the report) is skipped.
+outputs (size and SHA-256 of the STEP, the report and the viewer files) is skipped.
 
 Library code: nothing here prints; it logs and raises :class:`~hot2cold.errors.Hot2ColdError`.
 """
@@ -37,7 +38,7 @@ from .. import __version__
 from ..errors import Hot2ColdError, InputError
 from ..io.inputs import check_input_file
 from .options import MorphOptions, to_path, to_text
-from .run import run_morph, tolerance_missed, write_cold, write_json
+from .run import VIEWS, run_morph, tolerance_missed, view_outputs, write_cold, write_json, write_views
 from .workers import one_thread_each
 
 log = logging.getLogger(__name__)
@@ -65,16 +66,24 @@ class Job:
     output: Path
     report: Path | None = None
     options: MorphOptions = MorphOptions()
+    vtu: Path | None = None
+    stl: Path | None = None
+    glb: Path | None = None
+    html: Path | None = None
 
     @property
     def record(self) -> Path:
         """The record written after the cold STEP: the inputs and outputs of the run that made it."""
         return self.output.with_name(self.output.name + RECORD_SUFFIX)
 
+    def views(self) -> dict[str, Path | None]:
+        """The viewer files asked for (``hot2cold morph``'s ``--vtu``, ``--stl``, ``--glb``, ``--html``)."""
+        return {what: getattr(self, what) for what in VIEWS}
+
     def outputs(self) -> list[tuple[str, Path]]:
         """The files the job writes, as (what, path); the record comes last, as it is written last."""
         out = [("output", self.output)] + ([("report", self.report)] if self.report else [])
-        return out + [("record", self.record)]
+        return out + view_outputs(self.views()) + [("record", self.record)]
 
     def inputs(self) -> list[tuple[str, Path]]:
         """The files the job reads, as (what, path): the hot STEP, the field and where given the field's
@@ -84,7 +93,7 @@ class Job:
 
 
 #: A job's own columns (CSV) or keys (TOML), before the morph options.
-JOB_KEYS = ("name", "hot", "field", "output", "report")
+JOB_KEYS = ("name", "hot", "field", "output", "report", *VIEWS)
 
 #: Every column or key a job may have, in the order the messages list them.
 OPTIONS = JOB_KEYS + MorphOptions.names()
@@ -214,7 +223,7 @@ def _job(where: str, row: dict, folder: Path) -> Job:
 
 #: The converter of each column or key: a CSV cell (stripped text) or a TOML value -> the job's value.
 _CONVERT: dict[str, Callable] = {"name": to_text, "hot": to_path, "field": to_path, "output": to_path,
-                                 "report": to_path,
+                                 "report": to_path, **{what: to_path for what in VIEWS},
                                  **{name: opt.convert for name, opt in MorphOptions.table().items()}}
 
 
@@ -344,6 +353,8 @@ def run_job(job: Job) -> dict:
             inputs = None               # a missing input: the morph says which
         result = run_morph(job.hot, job.field, job.options)
         for _ in write_cold(result, job.output, job.report):
+            pass
+        for _ in write_views(result, job.views()):
             pass
         missed = tolerance_missed(result)
         status, code = ("tolerance-missed", 5) if missed else ("ok", 0)

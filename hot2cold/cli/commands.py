@@ -165,15 +165,12 @@ def _check_output(inputs, output: Path, what: str) -> None:
 
 def _outputs(args) -> list[tuple[str, Path]]:
     """Every file the run will write, as (what, path)."""
-    from ..io.export import surface_path
+    from .run import VIEWS, view_outputs
 
     out = [("output", args.output)]
     if args.report:
         out.append(("report", args.report))
-    if args.vtu:
-        out += [("--vtu", args.vtu), ("--vtu surface", surface_path(args.vtu))]
-    out += [(f"--{name}", getattr(args, name)) for name in ("stl", "glb", "html") if getattr(args, name)]
-    return out
+    return out + [(f"--{what}", path) for what, path in view_outputs({w: getattr(args, w) for w in VIEWS})]
 
 
 def _check_outputs(args) -> None:
@@ -205,23 +202,11 @@ def _html_writer():
 
 def _write_exports(args, result):
     """Write the viewer exports asked for, yielding each path as soon as it is written."""
-    from ..io import export
+    from .run import VIEWS, write_views
 
-    surface = None
-    if args.vtu or args.stl or args.glb:
-        log.info("triangulating the cold part for the viewer exports")
-        surface = export.cold_surface(result)
-    if args.vtu:
-        yield from export.write_vtu(result, args.vtu, surface)
-    if args.stl:
-        yield export.write_stl(result, args.stl, surface)
-    if args.glb:
-        yield export.write_glb(result, args.glb, surface)
-    if args.html:
-        if not args.quiet:
-            print(f"writing {args.html} ...", file=sys.stderr, flush=True)
-        _html_writer()(result, args.html, scale=args.scale)   # atomic itself; OutputError on failure
-        yield args.html
+    if args.html and not args.quiet:       # the page takes seconds: say so
+        print(f"writing {args.html} ...", file=sys.stderr, flush=True)
+    yield from write_views(result, {what: getattr(args, what) for what in VIEWS}, scale=args.scale)
 
 
 def _morph(args) -> int:

@@ -46,6 +46,49 @@ def write_cold(result, output: str | os.PathLike, report: str | os.PathLike | No
     yield Path(output)
 
 
+#: The viewer files a run may write besides the cold STEP and the report: ``hot2cold morph``'s flags and a
+#: batch job's columns of the same names.
+VIEWS = ("vtu", "stl", "glb", "html")
+
+
+def view_outputs(views: dict) -> list[tuple[str, Path]]:
+    """The files the ``views`` asked for (``{"vtu": path or None, ...}``) will be, as (what, path): a VTU is
+    two files, the nodes and the cold surface beside them."""
+    from ..io.export import surface_path
+
+    out = []
+    for what in VIEWS:
+        path = views.get(what)
+        if path is not None:
+            out.append((what, Path(path)))
+            if what == "vtu":
+                out.append(("vtu surface", surface_path(path)))
+    return out
+
+
+def write_views(result, views: dict, scale: float | None = None) -> Iterator[Path]:
+    """Write the viewer files of ``views`` (``{"vtu": path or None, "stl": ..., "glb": ..., "html": ...}``)
+    of a morph ``result``, yielding each path as soon as it is written; the cold surface is triangulated once
+    for all of them.  ``scale``: the displacement magnification of the HTML report's pictures.  Raises
+    :class:`OutputError` when one cannot be written (those before it stay written)."""
+    from ..io import export
+
+    surface = None
+    if any(views.get(what) for what in ("vtu", "stl", "glb")):
+        surface = export.cold_surface(result)
+    if views.get("vtu"):
+        yield from export.write_vtu(result, views["vtu"], surface)
+    if views.get("stl"):
+        yield export.write_stl(result, views["stl"], surface)
+    if views.get("glb"):
+        yield export.write_glb(result, views["glb"], surface)
+    if views.get("html"):
+        from ..views.page import write_html
+
+        write_html(result, views["html"], scale=scale)       # atomic itself; OutputError on failure
+        yield Path(views["html"])
+
+
 def tolerance_missed(result) -> str | None:
     """The one-line message when the morph's tolerance (``--tolerance``, default 1e-3 mm) was not met, else
     None."""

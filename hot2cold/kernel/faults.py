@@ -3,8 +3,8 @@
 :func:`solid_faults` lists the faces of a solid that ``BRepCheck_Analyzer`` refuses (with their surface
 type, a point on them and the statuses BRepCheck gives the face, its wires, edges and vertices), or the
 solid's own statuses (e.g. an unorientable shell) when no face is at fault; :func:`describe_face` names one
-face for a message, :func:`face_label` for a report.  Used on the hot part as read (a broken input) and on the part after B-spline
-conversion (a conversion that broke it).
+face for a message and :func:`face_label` for a report.  Used on the hot part as read (a broken input) and on
+the part after B-spline conversion (a conversion that broke it).
 """
 from __future__ import annotations
 

@@ -718,8 +718,7 @@ def _classified(part, field: DisplacementField, settings: Settings, projector: P
 def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress: Progress | None) -> MorphResult:
     """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords."""
     stages = _Stages(progress)
-    stages.begin("read")
-    field = as_field(field, **reading)
+    field = as_field(field, **reading)     # no start marker: a field refused says so alone
     stages.lap("read")
     inversion = None
     if invert:
