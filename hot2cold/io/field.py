@@ -5,12 +5,14 @@ takes it to the cold (unloaded, room temperature) state.  Inside hot2cold everyt
 
 File formats read by :func:`read_field`
 ---------------------------------------
-*Text* (``.csv``, ``.txt``, ``.dat``, any other name): a header line naming at least the columns
-``x, y, z, dx, dy, dz`` in any order and any letter case, then one line per node.  Fields are separated
-by commas, by semicolons (then a decimal comma is accepted: ``1,5;2,25``) or by whitespace; the
+*Text* (``.csv``, ``.txt``, ``.dat``, any other name): a header line naming the positions and the
+displacements in any order and any letter case, ``x, y, z, dx, dy, dz`` or as other tools name them
+(``ux``, ``U1``, ``COORD1``, ``Points:0``, ``X Location (mm)``: :mod:`hot2cold.io.columns`, which also takes
+a unit written after a name and a user's ``columns`` mapping), then one line per node.  Fields are separated
+by commas, by semicolons or tabs (then a decimal comma is accepted: ``1,5;2,25``) or by whitespace; the
 separator is taken from the header line.  A column named ``id``, ``node``, ``node_id``, ``nodeid``,
-``nid`` or ``node_number`` (``Node Number``) becomes :attr:`DisplacementField.node_ids`; any other
-extra column is ignored.  Every line must have as many fields as the header.  ``#`` starts a comment;
+``nid``, ``node_number`` (``Node Number``) or ``node_label`` becomes :attr:`DisplacementField.node_ids`; any
+other extra column is ignored.  Every line must have as many fields as the header.  ``#`` starts a comment;
 blank lines, surrounding spaces, quotes around names, a UTF-8 byte-order mark and UTF-16 text (with its
 byte-order mark) are tolerated.  A header written as a comment (``# x,y,z,dx,dy,dz`` as ``numpy.savetxt(...,
 header=...)`` writes it) is used when no plain header line precedes the numbers.
@@ -31,6 +33,13 @@ to 6 significant digits only: pass ``points_from=`` (the :class:`~hot2cold.fe.me
 on, or a field or ``.npz`` / text file with node ids, in the same length unit as the ``.frd``) to take the
 node positions from there, matched by node number; positions that disagree with the ``.frd`` beyond its
 rounding raise an error.
+
+*Solver results*: ANSYS Mechanical APDL ``.rst`` (:mod:`hot2cold.io.ansys`, through ansys-mapdl-reader: node
+positions, displacements in global axes, the unit system and the solid elements' boundary triangles), Nastran
+``.op2`` (NX and MSC, :mod:`hot2cold.io.nastran`, native: the static displacement tables and the GRID
+geometry, in the basic frame) and punch ``.pch`` (displacements only: positions from ``points_from``, a
+``.bdf``'s GRID cards or a field with node ids).  The last result set, or the one named by ``field_name``
+or numbered by ``step``.
 
 *Mesh files read by meshio* (``.vtu``, ``.vtk``, ``.xdmf``/``.xmf``, ``.msh``, ``.med``, ``.h5m`` and
 meshio's other formats; VTK, VTU and gmsh files are also recognised by content): the mesh points and a
