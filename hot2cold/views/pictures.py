@@ -1,10 +1,17 @@
 """Pictures of a morph for the HTML report: PNG bytes made with matplotlib's object interface.
 
 * :func:`overlay_png` -- hot (red) and cold (blue) part overlaid, the displacement exaggerated by a stated
-  factor so it can be seen (the paper's Fig. 8 and 10);
-* :func:`error_maps_png` -- per face, the FE nodes coloured by their distance to the cold part (eq. 21);
+  factor so it can be seen (the paper's Fig. 8 and 10), seen along named coordinate axes ("view along -Z
+  (top)");
+* :func:`error_maps_png` -- per face, the FE nodes coloured by their distance to the cold part (eq. 21), on
+  one colour scale for all faces of a result (:func:`error_scale`) with the tolerance marked on it and a
+  pass/fail mark per face;
 * :func:`curvature_png` -- mean curvature of the hot and the morphed surfaces side by side, and their
-  difference, on the largest faces (the paper's Fig. 9 and 11).
+  difference, on the largest faces (the paper's Fig. 9 and 11); rounding noise below
+  :func:`curvature_floor` drawn as zero.
+
+Each ``*_png`` has a ``*_figure`` twin that returns the :class:`~matplotlib.figure.Figure` (with an Agg canvas)
+instead of PNG bytes, for tests and for callers that want to draw more on it.
 
 Only :class:`matplotlib.figure.Figure` and the Agg canvas are used: no pyplot, no backend switching, so
 nothing global changes.  Every picture is drawn from one triangle mesh of the hot part
@@ -22,12 +29,15 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection, PolyCollection
-from matplotlib.colors import Normalize, TwoSlopeNorm
+from matplotlib.colors import Colormap, ListedColormap, Normalize
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
-from matplotlib.ticker import FuncFormatter
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from ..core.bspline import BSplineSurface, clip_uv, evaluate_curve, mean_curvature, surface_derivatives
 from ..core.model import Role
@@ -42,6 +52,14 @@ COLD_COLOUR = (0.12, 0.30, 0.80)
 
 #: Default exaggeration: the largest displacement is drawn as this fraction of the part's diagonal.
 DISPLACEMENT_FRACTION = 0.05
+
+#: Colours of the pass and the fail marks of the error maps.
+PASS_COLOUR = (0.10, 0.50, 0.22)
+FAIL_COLOUR = (0.78, 0.16, 0.16)
+
+#: A curvature below this share of ``max(1 / part diagonal, the face's largest |H|)`` is rounding noise
+#: (:func:`curvature_floor`).
+CURVATURE_NOISE = 1e-9
 
 _EDGE_SAMPLES = 64
 
@@ -155,7 +173,8 @@ _SMALL = FuncFormatter(lambda x, _pos: f"{x:.2g}")
 # ------------------------------------------------------------------------------------------------ overlay
 @dataclass(frozen=True)
 class View:
-    """An orthographic view: looking along ``direction``, with ``up`` pointing up on the picture."""
+    """An orthographic view: looking along ``direction (3,)``, with ``up (3,)`` pointing up on the picture;
+    ``name`` says where from ("top"), the titles add the axis ("view along −Z (top)")."""
 
     name: str
     direction: np.ndarray
@@ -171,20 +190,38 @@ class View:
 
 
 def default_views(points: np.ndarray) -> list[View]:
-    """Three views along the principal axes of ``points``: along the thinnest axis (the part seen
-    flat), the middle one and the longest one."""
-    centred = points - points.mean(axis=0)
-    _, _, vt = np.linalg.svd(centred[:: max(1, len(centred) // 20000)], full_matrices=False)
-    axes = []
-    for a in vt:                                   # deterministic signs: largest component positive
-        axes.append(a if a[np.argmax(np.abs(a))] > 0 else -a)
-    e1, e2, e3 = axes
-    return [View("thinnest axis", -e3, e2), View("middle axis", -e2, e3), View("longest axis", -e1, e2)]
+    """Three views along coordinate axes of ``points (n, 3)``: the top view along -Z (X right, Y up), the
+    front view along +Y (X right, Z up) and the right view along -X (Y right, Z up), in the order of the
+    points' extent along the view direction: first the view along the axis the part is thinnest along
+    (it shows the largest outline), then the middle one, then the longest.
+
+    The axes are named rather than the part's principal axes taken, so that a reader can tell where each
+    view looks from; every view's right and up are positive coordinate axes, so its tick labels are the
+    part's coordinates."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    eye = np.eye(3)
+    views = [View("top", -eye[2], eye[1]), View("front", eye[1], eye[2]), View("right", -eye[0], eye[2])]
+    ext = np.ptp(points, axis=0) if len(points) else np.ones(3)
+    depth = [float(np.abs(v.direction) @ ext) for v in views]
+    order = sorted(range(len(views)), key=lambda i: depth[i])          # stable: top, front, right on ties
+    return [views[i] for i in order]
 
 
-def _direction_text(d: np.ndarray) -> str:
+def _axis_text(d: np.ndarray) -> str:
+    """``+X``, ``−Z``, ... for a vector ``(3,)`` along a coordinate axis, else its unit vector in brackets."""
     d = np.asarray(d, float) / np.linalg.norm(d)
+    i = int(np.argmax(np.abs(d)))
+    if abs(abs(d[i]) - 1.0) < 1e-9:
+        return ("+" if d[i] > 0 else "−") + "XYZ"[i]
     return "(" + ", ".join(f"{x:+.2f}" for x in d) + ")"
+
+
+def _view_title(view: View) -> str:
+    """``view along −Z (top)`` and, on a second line, which axes point right, up and towards the viewer."""
+    right, up, towards = (_axis_text(b) for b in view.basis())
+    along = _axis_text(view.direction)
+    name = f" ({view.name})" if view.name and view.name != along else ""
+    return f"view along {along}{name}\n{right} right, {up} up, {towards} towards you"
 
 
 def _shaded_layer(points: np.ndarray, triangles: np.ndarray, basis: np.ndarray, colour, box, size_px) -> np.ndarray:
@@ -225,11 +262,22 @@ def _composite(layers: list[np.ndarray], opacity: float) -> np.ndarray:
 def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None = None,
                 views: list[View] | None = None, width_in: float = 14.0, dpi: int = 100,
                 opacity: float = 0.55) -> bytes:
-    """Hot part (red) and cold part (blue) overlaid, from several orthographic views.
+    """Hot part (red) and cold part (blue) overlaid, from several orthographic views
+    (:func:`overlay_figure`).  Returns PNG bytes."""
+    return _png(overlay_figure(result, scale, mesh=mesh, views=views, width_in=width_in, dpi=dpi,
+                               opacity=opacity), dpi)
+
+
+def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | None = None,
+                   views: list[View] | None = None, width_in: float = 14.0, dpi: int = 100,
+                   opacity: float = 0.55) -> Figure:
+    """The figure of :func:`overlay_png`: hot part (red) and cold part (blue) overlaid, a panel per view
+    (default :func:`default_views`: along -Z, +Y and -X, each titled with its axis and name).
 
     The cold part is drawn as ``hot + scale * (cold - hot)`` (default scale: :func:`displacement_scale`).
-    Each part is rendered shaded and laid over the other translucently (purple where they overlap), and the
-    edges of both are drawn on top as lines.  Returns PNG bytes.
+    Each part is rendered shaded (at ``dpi``) and laid over the other translucently (purple where they
+    overlap), and the edges of both are drawn on top as lines.  The panels' axes are labelled with the
+    coordinate axes they show.
     """
     scale = displacement_scale(result) if scale is None else check_scale(scale)
     mesh = mesh if mesh is not None else mesh_of(result)
@@ -250,7 +298,8 @@ def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None
     # panels as wide as their views at one common height (no panel squeezed into a tall, empty column)
     ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]
     height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
-    fig = Figure(figsize=(width_in, height + 1.2), layout="constrained")
+    fig = Figure(figsize=(width_in, height + 1.4), layout="constrained")
+    FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
     for ax, view, b, box in zip(axes, views, bases, boxes):
         ratio = (box[3] - box[2]) / (box[1] - box[0])
@@ -266,9 +315,11 @@ def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None
         ax.set_xlim(box[0], box[1])
         ax.set_ylim(box[2], box[3])
         ax.set_aspect("equal")
-        ax.set_title(f"looking along the {view.name}\n{_direction_text(view.direction)}", fontsize=8)
+        ax.set_title(_view_title(view), fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.set_xlabel("mm", fontsize=7)
+        ax.set_xlabel(f"{_axis_text(b[0])} [mm]", fontsize=8)
+        ax.set_ylabel(f"{_axis_text(b[1])} [mm]", fontsize=8)
+
     def look(colour):                       # a face's colour as the composite shows it (lit, translucent)
         return tuple(1.0 - opacity + opacity * 0.9 * np.asarray(colour))
 
@@ -278,7 +329,7 @@ def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None
                               label=f"cold, displacement × {scale:.3g}"),
                         Patch(facecolor=look(both), edgecolor="none", label="both")],
                loc="outside lower center", ncols=3, fontsize=9, frameon=False)
-    return _png(fig, dpi)
+    return fig
 
 
 # --------------------------------------------------------------------------------------------- error maps
@@ -307,18 +358,158 @@ def error_faces(result, max_faces: int = 12) -> list[int]:
     return sorted(k for _, k in sorted(counts, reverse=True)[:max_faces])
 
 
+@dataclass(frozen=True)
+class ErrorScale:
+    """The one colour scale of a result's error maps: 0 to ``top``, the larger of ``largest``, the largest
+    node error of the result (mm), and the limit.
+
+    ``tolerance`` (mm, None when none was set) and ``allowance``, what the field's scatter adds to it at the
+    nodes (mm), give the ``limit`` a node's error is judged against, as
+    :attr:`hot2cold.pipeline.report.Report.tolerance_met` judges.  Errors up to the limit take viridis,
+    errors above it a red ramp, so a map tells at a glance whether anything misses.  The allowance is named
+    in the texts only where it matters, as the report page does (above a tenth of the tolerance), or where
+    an error passes only thanks to it.
+    """
+
+    largest: float
+    tolerance: float | None
+    allowance: float = 0.0
+
+    @property
+    def top(self) -> float:
+        top = max(self.largest, self.limit or 0.0)
+        return top if top > 0.0 else 1.0
+
+    @property
+    def limit(self) -> float | None:
+        return None if self.tolerance is None else self.tolerance + self.allowance
+
+    def label(self, largest: float | None = None) -> str:
+        """``tolerance 0.001 mm``, or ``tolerance 0.001 + 0.0002 mm`` where the scatter allowance counts for
+        errors up to ``largest`` mm (default: the result's largest)."""
+        if self.tolerance is None:
+            return "no tolerance set"
+        largest = self.largest if largest is None else largest
+        if self.allowance > 0.1 * self.tolerance or (self.allowance > 0.0 and
+                                                     self.tolerance < largest <= self.tolerance + self.allowance):
+            return f"tolerance {self.tolerance:.3g} + {self.allowance:.2g} mm"
+        return f"tolerance {self.tolerance:.3g} mm"
+
+    @property
+    def norm(self) -> Normalize:
+        return Normalize(0.0, self.top)
+
+    @property
+    def cmap(self) -> Colormap:
+        low, limit = colormaps["viridis"], self.limit
+        if limit is None or self.top <= limit:
+            return low
+        n = 1024
+        n_low = int(np.clip(round(n * limit / self.top), 1, n - 1))
+        colours = np.vstack([low(np.linspace(0.0, 1.0, n_low)),
+                             colormaps["Reds"](np.linspace(0.55, 1.0, n - n_low))])
+        return ListedColormap(colours, name="error above tolerance")
+
+    def verdict(self, largest: float) -> tuple[str, tuple[float, float, float] | str]:
+        """The pass/fail mark of a map whose largest error is ``largest`` (mm): its text and colour."""
+        limit = self.limit
+        if not np.isfinite(largest):
+            return "no node measured", "0.4"
+        if limit is None:
+            return f"Δmax {largest:.2g} mm, no tolerance set", "0.2"
+        if largest <= limit:
+            return f"Δmax {largest:.2g} mm ≤ {self.label(largest)} ✓", PASS_COLOUR
+        return f"Δmax {largest:.2g} mm > {self.label(largest)} ✗", FAIL_COLOUR
+
+
+def error_scale(result) -> ErrorScale:
+    """The colour scale every error map of ``result`` uses, whichever faces it shows: 0 to the larger of
+    the largest node error of the result (``result.node_errors (N,)``, NaN ignored) and the tolerance
+    (``result.report.tolerance`` plus the field's scatter ``allowance``).  One scale for all faces, so that
+    a face with errors of 1e-13 mm looks calm next to one at 1e-3 mm."""
+    rep = result.report
+    err = np.asarray(result.node_errors, float)
+    finite = err[np.isfinite(err)]
+    largest = float(finite.max()) if len(finite) else 0.0
+    if rep.tolerance is None:
+        return ErrorScale(largest, None)
+    return ErrorScale(largest, float(rep.tolerance), float(rep.allowance or 0.0))
+
+
+def _error_colourbar(fig: Figure, axes, scale: ErrorScale) -> None:
+    """One colour bar for all ``axes``, the limit drawn across it as a black line and named at its tick."""
+    cb = fig.colorbar(ScalarMappable(norm=scale.norm, cmap=scale.cmap), ax=list(axes), shrink=0.9,
+                      aspect=35)
+    cb.set_label("distance to cold part [mm]", fontsize=9)
+    cb.ax.tick_params(labelsize=7)
+    limit = scale.limit
+    if limit is None:
+        cb.ax.yaxis.set_major_formatter(_SMALL)
+        return
+    ticks = [float(t) for t in MaxNLocator(6).tick_values(0.0, scale.top)
+             if 0.0 <= t <= scale.top and abs(t - limit) > 0.08 * scale.top]
+    values = sorted(ticks + [limit])
+    named = scale.label().replace("tolerance ", "tolerance\n", 1).replace(" + ", "\n+ ", 1)
+    cb.set_ticks(values, labels=[named if v == limit else f"{v:.2g}" for v in values])
+    for text, v in zip(cb.ax.get_yticklabels(), values):
+        if v == limit:
+            text.set_fontweight("bold")
+            text.set_fontsize(8)
+    cb.ax.axhline(limit, color="k", linewidth=2.0)
+
+
+def _worst_node_legend(ax, pts: np.ndarray, vals: np.ndarray) -> None:
+    """Ring the node of ``pts (n, 2)`` with the largest of ``vals (n,)`` (black on a white halo, visible on
+    every colour) and name it in a legend, in the corner of the axes that covers the fewest nodes and not
+    the ringed one (matplotlib's "best" place costs seconds on thousands of nodes).  Call after the axes'
+    limits are set."""
+    worst = int(np.argmax(vals))
+    for width, colour in ((3.0, "white"), (1.4, "black")):
+        ax.scatter(pts[worst, :1], pts[worst, 1:], s=120, facecolors="none", edgecolors=colour,
+                   linewidths=width, zorder=5)
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    frac = (pts - [x0, y0]) / [(x1 - x0) or 1.0, (y1 - y0) or 1.0]          # (n, 2) in axes fraction
+    corners = {"upper right": (1, 1), "upper left": (0, 1), "lower left": (0, 0), "lower right": (1, 0)}
+
+    def covered(corner: tuple[int, int]) -> float:
+        near = (np.abs(frac[:, 0] - corner[0]) < 0.6) & (np.abs(frac[:, 1] - corner[1]) < 0.12)
+        return float(near.sum()) + (np.inf if near[worst] else 0.0)
+
+    loc = min(corners, key=lambda name: covered(corners[name]))
+    handle = Line2D([], [], linestyle="none", marker="o", markersize=10, markerfacecolor="none",
+                    markeredgecolor="black", markeredgewidth=1.4, label=f"worst node: {vals[worst]:.2e} mm")
+    ax.legend(handles=[handle], loc=loc, fontsize=7, framealpha=0.85, handletextpad=0.3, borderpad=0.3)
+
+
 def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
                    columns: int = 3, panel_in: float = 4.2, dpi: int = 100) -> bytes:
-    """Per face, its FE nodes coloured by their distance to the cold part (mm, eq. 21), over the face in
-    developed parameters; nodes of its edges as diamonds.  Returns PNG bytes."""
+    """Per face, its FE nodes coloured by their distance to the cold part (:func:`error_maps_figure`).
+    Returns PNG bytes."""
+    return _png(error_maps_figure(result, faces, mesh=mesh, columns=columns, panel_in=panel_in), dpi)
+
+
+def error_maps_figure(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
+                      columns: int = 3, panel_in: float = 4.2) -> Figure:
+    """The figure of :func:`error_maps_png`: a panel per face (default :func:`error_faces`), its FE nodes
+    (circles) and the nodes of its edges (diamonds) coloured by their distance to the cold part (mm,
+    eq. 21), over the face in developed parameters.
+
+    All panels, and every error map of the same result, share :func:`error_scale` and one colour bar with
+    the tolerance marked on it.  Each panel's title gives its nodes and errors and a pass/fail mark
+    (green ✓ / red ✗) of the largest error it shows against the tolerance; the worst node is ringed and
+    named in a legend.
+    """
     faces = error_faces(result) if faces is None else list(faces)
     if not faces:
         raise ValueError("no face to draw")
     mesh = mesh if mesh is not None else mesh_of(result)
     cls = result.classification
     err = np.asarray(result.node_errors, float)
+    scale = error_scale(result)
+    norm, cmap = scale.norm, scale.cmap
     rows, cols = _grid(len(faces), columns)
-    fig = Figure(figsize=(panel_in * cols, panel_in * 0.95 * rows), layout="constrained")
+    fig = Figure(figsize=(panel_in * cols + 1.0, panel_in * 1.02 * rows), layout="constrained")
+    FigureCanvasAgg(fig)
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for ax in axes[len(faces):]:
         ax.set_axis_off()
@@ -335,40 +526,36 @@ def error_maps_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh
         marker = np.r_[np.zeros(len(face_nodes), bool), np.ones(len(edge_nodes), bool)]
         ok = np.isfinite(vals)
         pts, vals, marker = pts[ok], vals[ok], marker[ok]
-        vmax = float(vals.max()) if len(vals) and vals.max() > 0 else 1.0
-        norm = Normalize(0.0, vmax)
         size = float(np.clip(3000.0 / max(len(vals), 1), 1.5, 25.0))
-        sc = None
         for m, sym, s in ((False, "o", size), (True, "D", 1.6 * size)):
             sel = marker == m
             order = np.argsort(vals[sel])                              # largest errors on top
             if sel.any():
-                sc = ax.scatter(pts[sel][order, 0], pts[sel][order, 1], c=vals[sel][order], cmap="viridis",
-                                norm=norm, s=s, marker=sym, linewidths=0)
-        if sc is not None:
-            cb = fig.colorbar(sc, ax=ax, shrink=0.9, format=_SMALL)
-            cb.set_label("distance to cold part [mm]", fontsize=8)
-            cb.ax.tick_params(labelsize=7)
+                ax.scatter(pts[sel][order, 0], pts[sel][order, 1], c=vals[sel][order], cmap=cmap, norm=norm,
+                           s=s, marker=sym, linewidths=0)
         rep = result.report.faces[k]
         on_edges = err[edge_nodes]
         on_edges = on_edges[np.isfinite(on_edges)]
         edge_text = (f"{len(on_edges)} nodes of its edges: Δmax {on_edges.max():.1e} mm" if len(on_edges)
                      else "no nodes on its edges")
         ax.set_title(f"face {k}: {rep.nodes} nodes, Δmax {rep.delta_max:.1e}, Δmean {rep.delta_mean:.1e} mm\n"
-                     f"{edge_text}", fontsize=8)
-        if len(vals):                                                  # ring the worst node
-            worst = int(np.argmax(vals))
-            ax.scatter(pts[worst, 0], pts[worst, 1], s=90, facecolors="none", edgecolors="red", linewidths=1.2)
+                     f"{edge_text}", fontsize=8, pad=17)
+        mark, colour = scale.verdict(float(vals.max()) if len(vals) else float("nan"))
+        ax.annotate(mark, (0.5, 1.0), xycoords="axes fraction", xytext=(0, 3), textcoords="offset points",
+                    ha="center", va="bottom", fontsize=8, fontweight="bold", color=colour)
         allxy = np.concatenate([xy, pts]) if len(pts) else xy
         lo, hi = allxy.min(axis=0), allxy.max(axis=0)
         pad = 0.03 * (hi - lo) + 1e-9
         ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
         ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
         _set_aspect(ax, allxy)
+        if len(vals):
+            _worst_node_legend(ax, pts, vals)
         ax.set_xlabel("along u [mm]", fontsize=8)
         ax.set_ylabel("along v [mm]", fontsize=8)
         ax.tick_params(labelsize=7)
-    return _png(fig, dpi)
+    _error_colourbar(fig, axes, scale)
+    return fig
 
 
 # -------------------------------------------------------------------------------------------- curvature
@@ -412,17 +599,35 @@ def _outward_sign(surface: BSplineSurface, mesh: TriangleMesh, verts: np.ndarray
     return 1.0 if np.nansum(np.einsum("ij,ij->i", np.cross(su, sv), outward)) >= 0 else -1.0
 
 
-def _curvature_norm(values: np.ndarray):
-    """Colour scale of a curvature map: 1-99 % of the values (a sharp leading edge does not wash out the
-    rest), zero always white, so on the diverging map red is convex and blue concave."""
-    finite = values[np.isfinite(values)]
-    if not len(finite):
-        return Normalize(-1.0, 1.0)
-    lo, hi = (float(x) for x in np.percentile(finite, [1, 99]))
-    if lo < 0 < hi:
-        return TwoSlopeNorm(0.0, lo, hi)
-    top = max(abs(lo), abs(hi)) or 1e-9                # one sign: symmetric about zero
+def _curvature_norm(values: np.ndarray, floor: float) -> Normalize:
+    """Colour scale of a curvature map, symmetric about zero (white; on the diverging map red is convex and
+    blue concave): up to the 99th percentile of ``|values|`` (a sharp leading edge does not wash out the
+    rest), at least ``floor`` (a map that is all zero stays white)."""
+    finite = np.abs(values[np.isfinite(values)])
+    top = float(np.percentile(finite, 99)) if len(finite) else 0.0
+    top = max(top, floor)
     return Normalize(-top, top)
+
+
+def curvature_floor(result, fc: "FaceCurvature") -> float:
+    """The noise floor (1/mm) of the curvatures of ``fc``: ``CURVATURE_NOISE * max(1 / diagonal, largest
+    |H| of the face hot or cold)``; a curvature, or a change of curvature, smaller than it is drawn as 0.
+
+    Why both terms: on a plane the face's own largest |H| is the rounding noise itself (±1e-21 1/mm on the
+    bundled blade's flat caps), so a floor relative to it alone would draw noise as a full colour ramp; the
+    part's size sets an absolute floor instead -- a radius of curvature of 1e9 diagonals sags
+    5e-10 diagonals over the whole part, far below any tolerance, while rounding in H stays some 1e-16 of
+    ``1 / size``.  On a strongly curved face rounding grows with |H|, hence the relative term, which still
+    leaves a change of 1e-9 of the face's curvature visible."""
+    largest = [np.nanmax(np.abs(v[fc.inside])) for v in (fc.hot, fc.cold)
+               if fc.inside.any() and np.isfinite(v[fc.inside]).any()]
+    return CURVATURE_NOISE * max([1.0 / float(result.part.diagonal), *map(float, largest)])
+
+
+def _flushed(values: np.ndarray, floor: float) -> np.ndarray:
+    """``values`` with every entry below ``floor`` in size set to 0 (NaN kept)."""
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(values) < floor, 0.0, values)
 
 
 @dataclass(frozen=True, eq=False)
@@ -477,25 +682,37 @@ def face_curvature(result, k: int, mesh: TriangleMesh | None = None, grid_points
 
 def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
                   panel_in: float = 4.0, dpi: int = 100, grid_points: int = 40000) -> bytes:
-    """Mean curvature of the hot and the morphed surface of each face (a row per face: hot, cold, cold
-    minus hot), from :func:`face_curvature` (H > 0 where convex).  Hot and cold share one colour scale.
-    Default faces: the four largest.  Returns PNG bytes."""
+    """Mean curvature of the hot and the morphed surface of each face (:func:`curvature_figure`).
+    Returns PNG bytes."""
+    return _png(curvature_figure(result, faces, mesh=mesh, panel_in=panel_in, grid_points=grid_points), dpi)
+
+
+def curvature_figure(result, faces: list[int] | None = None, *, mesh: TriangleMesh | None = None,
+                     panel_in: float = 4.0, grid_points: int = 40000) -> Figure:
+    """The figure of :func:`curvature_png`: a row per face (default the four largest), the mean curvature
+    ``(ny, nx)`` of the hot and the morphed surface and cold minus hot, from :func:`face_curvature` (H > 0
+    where convex).
+
+    Values below :func:`curvature_floor` are drawn as 0, and a panel that is all below it says so in its
+    title ("flat", or "no change" for the difference).  Hot and cold share one colour scale, symmetric about
+    zero; the difference has its own, also symmetric.
+    """
     mesh = mesh if mesh is not None else mesh_of(result)
     faces = curvature_faces(result, mesh=mesh) if faces is None else list(faces)
     if not faces:
         raise ValueError("no face to draw")
     fig = Figure(figsize=(panel_in * 3, panel_in * 0.95 * len(faces)), layout="constrained")
+    FigureCanvasAgg(fig)
     axes = fig.subplots(len(faces), 3, squeeze=False)
     for row, k in zip(axes, faces):
         fc = face_curvature(result, k, mesh, grid_points)
         inside = fc.inside
-        diff = fc.cold - fc.hot
-        norm = _curvature_norm(np.concatenate([fc.hot[inside], fc.cold[inside]]))
-        finite = diff[inside][np.isfinite(diff[inside])]
-        dmax = float(np.abs(np.percentile(finite, [1, 99])).max()) if len(finite) else 0.0
-        dnorm = TwoSlopeNorm(0.0, -max(dmax, 1e-12), max(dmax, 1e-12))
-        panels = ((fc.hot, norm, "hot", "H"), (fc.cold, norm, "cold (morphed)", "H"),
-                  (diff, dnorm, "cold − hot", "ΔH"))
+        floor = curvature_floor(result, fc)
+        hot, cold = _flushed(fc.hot, floor), _flushed(fc.cold, floor)
+        diff = _flushed(fc.cold - fc.hot, floor)
+        norm = _curvature_norm(np.concatenate([hot[inside], cold[inside]]), floor)
+        dnorm = _curvature_norm(diff[inside], floor)
+        panels = ((hot, norm, "hot", "H"), (cold, norm, "cold (morphed)", "H"), (diff, dnorm, "cold − hot", "ΔH"))
         for ax, (vals, nrm, label, sym) in zip(row, panels):
             cmap = "RdBu_r" if sym == "H" else "PuOr_r"
             im = ax.imshow(vals, origin="lower", extent=fc.extent, cmap=cmap, norm=nrm, interpolation="nearest")
@@ -503,11 +720,17 @@ def curvature_png(result, faces: list[int] | None = None, *, mesh: TriangleMesh 
             cb.set_label(f"mean curvature {sym} [1/mm]", fontsize=8)
             cb.ax.tick_params(labelsize=7)
             shown = vals[inside]
-            span = (f"{np.nanmin(shown):.3g} … {np.nanmax(shown):.3g} 1/mm" if np.isfinite(shown).any()
-                    else "undefined")
-            ax.set_title(f"face {k}, {label}\n{sym} {span}", fontsize=9)
+            shown = shown[np.isfinite(shown)]
+            if not len(shown):
+                span = f"{sym} undefined"
+            elif not shown.any():
+                span = (f"{'flat' if sym == 'H' else 'no change'}: |{sym}| < {floor:.1e} 1/mm "
+                        f"(noise floor) everywhere")
+            else:
+                span = f"{sym} {shown.min():.3g} … {shown.max():.3g} 1/mm"
+            ax.set_title(f"face {k}, {label}\n{span}", fontsize=9)
             ax.set_aspect("equal" if fc.equal_aspect else "auto")
             ax.set_xlabel("along u [mm]", fontsize=8)
             ax.set_ylabel("along v [mm]", fontsize=8)
             ax.tick_params(labelsize=7)
-    return _png(fig, dpi)
+    return fig
