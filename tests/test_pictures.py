@@ -257,3 +257,19 @@ def test_overlay_titles_name_the_axes(blade, mesh):
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     x0, x1 = panels[0].get_xlim()
     assert x0 < lo[0] < hi[0] < x1 and x1 - x0 < 1.5 * (hi[0] - lo[0])
+
+
+def test_face_numbers_on_the_part(blade, mesh):
+    """Issue 17: a picture of the part with its face numbers, so the report's rows can be found on it.  The
+    blade's tip cap (plane z = 100) is numbered in the view from the top (along -Z), its root cap (z = 0)
+    faces away from every view and is named under the figure instead; every other face is numbered in some
+    view; the PNG is a PNG."""
+    labels = blade.part.face_labels
+    tip, root = labels.index("plane z = 100"), labels.index("plane z = 0")
+    fig = visual.face_numbers_figure(blade, mesh=mesh)
+    shown = {ax.get_title().splitlines()[0]: {int(t.get_text()) for t in ax.texts} for ax in fig.axes}
+    top = shown["view along −Z (top)"]
+    assert tip in top and root not in top
+    assert set().union(*shown.values()) == set(range(len(blade.part.faces))) - {root}
+    assert fig.get_supxlabel() == f"turned away from these views: face {root} (plane z = 0)"
+    assert visual.face_numbers_png(blade, mesh=mesh).startswith(PNG_SIGNATURE)

@@ -226,14 +226,15 @@ def _view_title(view: View) -> str:
 
 def _shaded_layer(points: np.ndarray, triangles: np.ndarray, basis: np.ndarray, colour, box, size_px) -> np.ndarray:
     """One part rendered opaque (flat-shaded triangles, far ones first) into an RGBA image ``(h, w, 4)``
-    covering ``box = (x0, x1, y0, y1)`` of the view; transparent where the part is not."""
+    covering ``box = (x0, x1, y0, y1)`` of the view; transparent where the part is not.  ``colour``: one RGB
+    ``(3,)`` for the part or one per triangle ``(T, 3)``."""
     p = points @ basis.T                                               # x, y, towards the viewer
     tri = p[triangles]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     light = np.array([-0.35, 0.45, 0.82])
     shade = 0.35 + 0.65 * np.abs(normal @ (light / np.linalg.norm(light)))
-    rgb = np.clip(np.outer(shade, colour), 0.0, 1.0)
+    rgb = np.clip(shade[:, None] * np.broadcast_to(np.asarray(colour, float), (len(tri), 3)), 0.0, 1.0)
     order = np.argsort(tri[:, :, 2].mean(axis=1))                    # painter's algorithm: far first
     w, h = size_px
     fig = Figure(figsize=(w / 100.0, h / 100.0), dpi=100)
@@ -329,6 +330,75 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
                               label=f"cold, displacement × {scale:.3g}"),
                         Patch(facecolor=look(both), edgecolor="none", label="both")],
                loc="outside lower center", ncols=3, fontsize=9, frameon=False)
+    return fig
+
+
+# --------------------------------------------------------------------------------------------- face numbers
+def face_numbers_png(result, *, mesh: TriangleMesh | None = None, views: list[View] | None = None,
+                     width_in: float = 14.0, dpi: int = 100) -> bytes:
+    """The hot part with each face's number on it (:func:`face_numbers_figure`).  Returns PNG bytes."""
+    return _png(face_numbers_figure(result, mesh=mesh, views=views, width_in=width_in), dpi)
+
+
+def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list[View] | None = None,
+                        width_in: float = 14.0) -> Figure:
+    """The hot part, each face in a colour of its own and its number written on it, a panel per view
+    (default :func:`default_views`), so that the report's rows ("face 3") can be found on the part.
+
+    A face's number sits at the area-weighted centre of its triangles that face the viewer (the
+    tessellation's triangles face out of the solid), drawn over the part; a face turned away from a view is
+    not numbered in it, and one turned away from all of them is named under the figure.
+    """
+    mesh = mesh if mesh is not None else mesh_of(result)
+    points, triangles = mesh.vertices, mesh.triangles
+    views = views if views is not None else default_views(points)
+    palette = colormaps["tab20"](np.arange(20))[:, :3] * 0.55 + 0.45           # light: the numbers read
+    colours = palette[mesh.face % 20]
+    tri = points[triangles]                                                      # (T, 3, 3)
+    centre = tri.mean(axis=1)                                                    # (T, 3)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])              # (T, 3), 2 x area, outward
+    n_faces = len(result.part.faces)
+    boxes = []
+    for view in views:
+        xy = points @ view.basis()[:2].T
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        pad = 0.04 * float(max(hi - lo))
+        boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
+    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]  # as the overlay's
+    height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
+    fig = Figure(figsize=(width_in, height + 0.9), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
+    numbered: set[int] = set()
+    for ax, view, box in zip(axes, views, boxes):
+        b = view.basis()
+        ratio = (box[3] - box[2]) / (box[1] - box[0])
+        px = 600
+        size = (px, max(8, int(px * ratio))) if ratio <= 1 else (max(8, int(px / ratio)), px)
+        facing = np.maximum(cross @ b[2], 0.0)                                   # projected area towards us
+        front = facing > 0.0                       # back faces culled: a thin part's far side shows no speckle
+        ax.imshow(_shaded_layer(points, triangles[front], b, colours[front], box, size), extent=box,
+                  origin="upper", interpolation="antialiased")
+        weight = np.bincount(mesh.face, weights=facing, minlength=n_faces)
+        for k in np.flatnonzero(weight > 1e-3 * max(weight.max(), 1e-300)):
+            numbered.add(int(k))
+            mine = mesh.face == k
+            at = (centre[mine] * facing[mine, None]).sum(axis=0) / weight[k]
+            ax.text(*(at @ b[:2].T), str(k), ha="center", va="center", fontsize=9, fontweight="bold",
+                    bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "0.3",
+                          "linewidth": 0.6, "alpha": 0.9})
+        ax.set_xlim(box[0], box[1])
+        ax.set_ylim(box[2], box[3])
+        ax.set_aspect("equal")
+        ax.set_title(_view_title(view), fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel(f"{_axis_text(b[0])} [mm]", fontsize=8)
+        ax.set_ylabel(f"{_axis_text(b[1])} [mm]", fontsize=8)
+    hidden = [k for k in range(n_faces) if k not in numbered]
+    if hidden:
+        title = getattr(result.part, "face_title", lambda k: "")
+        named = ", ".join(f"{k}" + (f" ({title(k)})" if title(k) else "") for k in hidden)
+        fig.supxlabel(f"turned away from these views: face {named}", fontsize=9)
     return fig
 
 
