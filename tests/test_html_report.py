@@ -129,12 +129,16 @@ def test_page_has_the_overall_checks(blade, page):
     assert "G1 continuity" in text and "Tolerance" in text
 
 
-def test_page_is_self_contained_with_three_valid_pngs(page):
+def test_page_is_self_contained_with_four_valid_pngs(page):
+    """The face numbers (issue 17), the overlay, the error maps and the curvature maps."""
     _, text, _, _ = page
-    assert "<script" not in text.lower() and "<link" not in text.lower()
+    assert "<link" not in text.lower()
+    # the only scripts are the 3D view's, inline: its data and its module (three.js packed inside)
+    assert re.findall(r"<script\b[^>]*>", text, re.I) == ['<script type="application/json" id="v3-data">',
+                                                         '<script type="module">']
     assert not re.search(r"""(src|href)\s*=\s*["'](?!data:image/png;base64,)""", text)
     images = _parse(text).images
-    assert len(images) == 3
+    assert len(images) == 4
     for src in images:
         png = base64.b64decode(src.removeprefix("data:image/png;base64,"), validate=True)
         w, h = _png_size(png)
@@ -149,7 +153,7 @@ def test_overlay_shows_hot_red_and_cold_blue_with_the_scale_in_the_caption(blade
     scale = visual.displacement_scale(blade)
     assert scale * blade.report.max_displacement == pytest.approx(0.05 * blade.part.diagonal)
     assert f"{scale:.3g} times" in text
-    png = base64.b64decode(_parse(text).images[0].removeprefix("data:image/png;base64,"))
+    png = base64.b64decode(_parse(text).images[1].removeprefix("data:image/png;base64,"))      # after the numbers
     rgb = imread(io.BytesIO(png), format="png")[..., :3]
     reddish = (rgb[..., 0] > rgb[..., 2] + 0.2).sum()
     bluish = (rgb[..., 2] > rgb[..., 0] + 0.2).sum()
@@ -220,7 +224,7 @@ def _tiny_png() -> bytes:
 def test_mesh_parameters_put_hot_and_cold_on_their_surfaces(blade, mesh):
     """The pictures' premise: a mesh vertex at (u, v) of face k is S_hot(u, v), and the cold surfaces at the
     same parameters are within the largest displacement of it."""
-    cold = visual._cold_vertices(blade, mesh)
+    cold = visual.cold_vertices(blade, mesh)
     for k, face in enumerate(blade.part.faces):
         verts = np.unique(mesh.triangles[mesh.face == k])
         hot = evaluate_surface(face.surface, mesh.uv[verts, 0], mesh.uv[verts, 1])

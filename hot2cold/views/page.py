@@ -2,10 +2,13 @@
 
     write_html(result, "report.html")
 
-The page holds the paper-style table per face and per edge (FE nodes, control points, Δmax, Δmean; the
-kink before and after the G1 correction on tangent edges), the overall checks (validity, free edges,
-volumes hot and cold, nodes used and ignored), the tolerance and refinements, and the pictures of
-:mod:`hot2cold.views.pictures`.  It loads nothing from anywhere: no scripts, no style sheets, no image files.
+The page holds an interactive 3D view (:mod:`hot2cold.views.viewer`: the cold part coloured by its
+deviation from the field, the hot part as a ghost, the FE nodes, an exaggeration slider; a click on a face
+picks its row of the face table), the paper-style table per face and per edge (FE nodes, control points,
+Δmax, Δmean; the kink before and after the G1 correction on tangent edges), the overall checks (validity,
+free edges, volumes hot and cold, nodes used and ignored), the tolerance and refinements, and the pictures
+of :mod:`hot2cold.views.pictures`.  It loads nothing from anywhere: the view's scripts (three.js included)
+and data are inline, the pictures are data URLs, there are no style sheets or files beside it.
 """
 from __future__ import annotations
 
@@ -20,6 +23,8 @@ from pathlib import Path
 
 from .. import __version__
 from . import pictures
+from .scene import build_scene
+from .viewer import STYLE as _VIEWER_STYLE, viewer_html
 from ..io.atomic import write_atomically
 
 log = logging.getLogger(__name__)
@@ -61,11 +66,14 @@ def _flag(ok: bool, yes: str, no: str) -> str:
     return f'<span class="ok">{_e(yes)}</span>' if ok else f'<span class="bad">{_e(no)}</span>'
 
 
-def _table(head: list[str], rows: list[list[str]], left: set[int] = frozenset(), cls: str = "") -> str:
-    """Cells are HTML already (escape before)."""
+def _table(head: list[str], rows: list[list[str]], left: set[int] = frozenset(), cls: str = "",
+           row_attrs: list[str] | None = None) -> str:
+    """Cells are HTML already (escape before); ``row_attrs`` one attribute string per row (HTML too)."""
     th = "".join(f'<th{" class=l" if i in left else ""}>{h}</th>' for i, h in enumerate(head))
-    body = "\n".join("<tr>" + "".join(f'<td{" class=l" if i in left else ""}>{c}</td>' for i, c in enumerate(r))
-                     + "</tr>" for r in rows)
+    attrs = row_attrs if row_attrs is not None else [""] * len(rows)
+    body = "\n".join(f"<tr{' ' + a if a else ''}>"
+                     + "".join(f'<td{" class=l" if i in left else ""}>{c}</td>' for i, c in enumerate(r))
+                     + "</tr>" for r, a in zip(rows, attrs))
     return f'<table class="{cls}"><thead><tr>{th}</tr></thead>\n<tbody>\n{body}\n</tbody></table>'
 
 
@@ -89,15 +97,21 @@ def _summary(report) -> str:
 
 
 def _face_table(report) -> str:
+    """One row per face, ``id="face-row-K"`` (the 3D view highlights the row of the face picked)."""
     several = len(report.solids) > 1                    # the solid column only when there is a choice
+    names = [getattr(f, "name", "") or "" for f in report.faces]
+    named = any(names)                                  # the name column only when a face has one
     rows = []
-    for f in report.faces:
-        rows.append([str(f.index), *([str(f.solid)] if several else []), str(f.nodes), _e(f.control_points),
-                     _mm(f.delta_max), _mm(f.delta_mean), str(f.artificial_nodes), f"{f.rank}/{f.unknowns}",
-                     _mm(f.condition, ".2g"), _e(" ".join(f.tied_sides) or "–")])
-    head = ["face", *(["solid"] if several else []), "FE nodes", "control points", "Δmax [mm]", "Δmean [mm]",
-            "artificial nodes", "rank / unknowns", "condition", "sides tied to edges"]
-    return _table(head, rows, left={len(head) - 1}, cls="faces")
+    for f, name in zip(report.faces, names):
+        rows.append([str(f.index), *([_e(name or "–")] if named else []), *([str(f.solid)] if several else []),
+                     str(f.nodes), _e(f.control_points), _mm(f.delta_max), _mm(f.delta_mean),
+                     str(f.artificial_nodes), f"{f.rank}/{f.unknowns}", _mm(f.condition, ".2g"),
+                     _e(" ".join(f.tied_sides) or "–")])
+    head = ["face", *(["name"] if named else []), *(["solid"] if several else []), "FE nodes", "control points",
+            "Δmax [mm]", "Δmean [mm]", "artificial nodes", "rank / unknowns", "condition", "sides tied to edges"]
+    left = {len(head) - 1, *({1} if named else set())}
+    attrs = [f'id="face-row-{f.index}" data-face="{f.index}"' for f in report.faces]
+    return _table(head, rows, left=left, cls="faces", row_attrs=attrs)
 
 
 def _edge_table(report) -> str:
@@ -201,11 +215,12 @@ def _timings(report) -> str:
     return f'<p class="muted">Morph timings: {cells}.</p>'
 
 
-def render_html(result, scale: float | None = None) -> str:
+def render_html(result, scale: float | None = None, *, interactive: bool = True) -> str:
     """The report page of ``result`` (a :class:`~hot2cold.morph.MorphResult`) as a string.
 
-    ``scale`` exaggerates the displacement in the overlay picture (default
-    :func:`hot2cold.pictures.displacement_scale`: the largest displacement drawn as 5 % of the part's size).
+    ``scale`` exaggerates the displacement in the overlay picture and starts the 3D view's slider there
+    (default :func:`hot2cold.pictures.displacement_scale`: the largest displacement drawn as 5 % of the part's
+    size).  ``interactive`` False leaves the 3D view out (a page without scripts, a few MB smaller).
     """
     report = result.report
     scale = pictures.displacement_scale(result) if scale is None else pictures.check_scale(scale)
@@ -216,7 +231,18 @@ def render_html(result, scale: float | None = None) -> str:
     errors = pictures.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
     curv_faces = pictures.curvature_faces(result, mesh=mesh)
     curvature = pictures.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
+    numbers = pictures.face_numbers_png(result, mesh=mesh)
     log.info("pictures drawn in %.2f s", time.perf_counter() - clock)
+    view = []
+    if interactive:
+        clock = time.perf_counter()
+        view = ["<h2>3D view</h2>", viewer_html(build_scene(result, mesh, exaggeration=scale)),
+                '<p class="muted">The cold part coloured by its deviation from the field (the nodes\' distances '
+                "to it, eq. 21, interpolated over each face from the nodes of the face and its edges; grey: a face "
+                "without nodes), the hot part as a red ghost. Drag to turn, right-drag to pan, wheel to zoom; "
+                "click a face (or a row of the face table) for its figures. The slider exaggerates the "
+                "displacement: vertices at hot + s × (cold − hot).</p>"]
+        log.info("3D view built in %.2f s", time.perf_counter() - clock)
 
     largest = report.max_displacement
     figures = [
@@ -225,6 +251,9 @@ def render_html(result, scale: float | None = None) -> str:
         f'<b>{scale:.3g} times</b> its size: the largest displacement, {largest:.4g} mm, appears as '
         f'{largest * scale:.4g} mm (part diagonal {result.part.diagonal:.4g} mm). Faces are translucent, '
         f'edges drawn as lines.</figcaption></figure>']
+    figures.insert(0,
+        f'<figure>{_img(numbers, "the faces and their numbers")}<figcaption>Figure 0. The hot part with the '
+        f"number of each face, as the tables name them (a colour per face).</figcaption></figure>")
     if errors is not None:
         left_out = len([f for f in report.faces if f.nodes > 0]) - len(error_faces)
         more = f" {left_out} faces with fewer nodes are not drawn." if left_out > 0 else ""
@@ -232,14 +261,20 @@ def render_html(result, scale: float | None = None) -> str:
             f'<figure>{_img(errors, "per-face error maps")}<figcaption>Figure 2. Per face, each FE node '
             f"coloured by its distance to the cold part (eq. 21, mm); circles are the face's nodes, diamonds "
             f"the nodes of its edges, the grey area is the trimmed face, in its parameters scaled to mm along "
-            f"the surface. Each face has its own colour scale.{_e(more)}</figcaption></figure>")
+            f"the surface. All maps share one colour scale, from 0 to the larger of the largest error and the "
+            f"tolerance (marked on the colour bar); errors above the tolerance are drawn in reds. Each title "
+            f"compares the largest error drawn with the tolerance (✓ within, ✗ beyond); a black ring marks the "
+            f"face's worst node.{_e(more)}</figcaption></figure>")
     if curvature is not None:
         figures.append(
             f'<figure>{_img(curvature, "mean curvature hot and cold")}<figcaption>Figure 3. Mean curvature '
             f"H (1/mm) of the hot and the morphed surface of the largest faces "
             f"({_e(', '.join(map(str, curv_faces)))}), "
             f"as in the paper's Fig. 9 and 11, and their difference; hot and cold share one colour scale "
-            f"(1–99 % of the values). A smooth difference means the morph added no wiggles."
+            f"symmetric about zero up to the 99th percentile of |H| (red convex, blue concave); curvatures "
+            f"below a noise floor (10⁻⁹ of the larger of 1/diagonal and the face's largest |H|) are drawn as "
+            f"zero, and a panel all below it is titled flat (no change for the difference). A smooth difference "
+            f"means the morph added no wiggles."
             f"</figcaption></figure>")
 
     now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
@@ -249,6 +284,7 @@ def render_html(result, scale: float | None = None) -> str:
         f'<p class="muted">hot2cold {_e(__version__)}, {_e(now)}. Method: GT2014-26683 (hot-to-cold '
         f"B-spline morphing; only control points move).</p>",
         _summary(report),
+        *view,
         "<h2>Faces</h2>", _face_table(report),
         "<h2>Edges</h2>", _edge_table(report),
         "<h2>Checks</h2>", _checks(report),
@@ -258,11 +294,12 @@ def render_html(result, scale: float | None = None) -> str:
         _timings(report),
     ]
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            f"<title>{_e(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
+            f"<title>{_e(title)}</title>\n<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
+            "</head>\n<body>\n"
             + "\n".join(body) + "\n</body>\n</html>\n")
 
 
-def write_html(result, path: str | os.PathLike, scale: float | None = None) -> None:
+def write_html(result, path: str | os.PathLike, scale: float | None = None, *, interactive: bool = True) -> None:
     """Write the report page of ``result`` to ``path`` atomically (a temporary file in the same folder,
     then ``os.replace``): a reader sees the old file or the whole new one, never a part.
 
@@ -270,6 +307,6 @@ def write_html(result, path: str | os.PathLike, scale: float | None = None) -> N
     when the folder cannot be written.
     """
     path = Path(path)
-    text = render_html(result, scale)
+    text = render_html(result, scale, interactive=interactive)
     write_atomically([(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))])
     log.info("wrote %s (%.0f kB)", path, len(text.encode("utf-8")) / 1024)

@@ -103,7 +103,7 @@ def _face_vertices(mesh: TriangleMesh, k: int) -> tuple[np.ndarray, np.ndarray]:
     return verts, local.reshape(tris.shape)
 
 
-def _cold_vertices(result, mesh: TriangleMesh) -> np.ndarray:
+def cold_vertices(result, mesh: TriangleMesh) -> np.ndarray:
     """Each mesh vertex moved onto the cold part: ``S_cold(u, v)`` of its face (same parameters as hot,
     :func:`hot2cold.io.export.points_on_faces`); a vertex without ``(u, v)`` or triangle stays where it is."""
     cold = points_on_faces([fm.surface for fm in result.faces], mesh)
@@ -283,7 +283,7 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
     scale = displacement_scale(result) if scale is None else check_scale(scale)
     mesh = mesh if mesh is not None else mesh_of(result)
     hot = mesh.vertices
-    cold = hot + scale * (_cold_vertices(result, mesh) - hot)
+    cold = hot + scale * (cold_vertices(result, mesh) - hot)
     hot_edges, cold_edges = _edge_polylines(result)
     cold_edges = [h + scale * (c - h) for h, c in zip(hot_edges, cold_edges)]
     views = views if views is not None else default_views(hot)
