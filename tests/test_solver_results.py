@@ -1,5 +1,5 @@
-"""Whole morphs from real solver result files (issue 17): ``hot2cold morph part.step results.rst`` and the same
-with a Nastran ``.op2``, through the command line, on the meshes' own blocks.
+"""Whole morphs from real solver result files (issue 17): ``hot2cold morph part.step results.rst -o cold.step
+--html r.html`` and the same with a Nastran ``.op2``, through the command line, on the meshes' own blocks.
 
 The results are real (``corpus/solver_results``: an ANSYS MAPDL 19.0 static run of a 5 x 5 x 10 m block of
 SOLID186 in SI units, an MSC Nastran run of a bent 1 x 2 x 3 block of CTETRA); the parts are the blocks their
@@ -47,9 +47,11 @@ def test_morph_from_solver_results(tmp_path, capsys, result, unit_factor):
         np.testing.assert_allclose(np.ptp(field.points, axis=0), [5000, 5000, 10000], rtol=1e-12)
     corners = _block_of(field, tmp_path / "part.step")
     code = main(["morph", str(tmp_path / "part.step"), str(path), "-o", str(tmp_path / "cold.step"),
-                 "--report", str(tmp_path / "report.json"), "-q"])
+                 "--report", str(tmp_path / "report.json"), "--html", str(tmp_path / "report.html"), "-q"])
     assert code == 0, capsys.readouterr().err
     report = json.loads((tmp_path / "report.json").read_text())
+    page = (tmp_path / "report.html").read_text(encoding="utf-8")        # its 3D view: tests/test_html_3d.py
+    assert '<script type="application/json" id="v3-data">' in page and 'id="face-row-5"' in page
     assert report["valid"] and report["delta_max"] <= 1e-3
     checks = check_solids(read_step(tmp_path / "cold.step"))
     assert len(checks) == 1 and checks[0].valid and checks[0].closed and checks[0].faces == 6
