@@ -260,6 +260,25 @@ def _composite(layers: list[np.ndarray], opacity: float) -> np.ndarray:
     return np.concatenate([1.0 - cover + cover * mixed, np.ones_like(cover)], axis=2)
 
 
+def _dress_view(ax, view: View, box) -> None:
+    """Limits ``box = (x0, x1, y0, y1)``, equal aspect, the view's title and its axes named on a view's panel."""
+    right, up, _ = view.basis()
+    ax.set_xlim(box[0], box[1])
+    ax.set_ylim(box[2], box[3])
+    ax.set_aspect("equal")
+    ax.set_title(_view_title(view), fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.set_xlabel(f"{_axis_text(right)} [mm]", fontsize=8)
+    ax.set_ylabel(f"{_axis_text(up)} [mm]", fontsize=8)
+
+
+def _view_panels(fig_width: float, boxes: list) -> tuple[list[float], float]:
+    """The width ratios of panels showing ``boxes`` side by side, as wide as their views at one common
+    height (no panel squeezed into a tall, empty column), and that height (inches) for ``fig_width``."""
+    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]
+    return ratios, float(np.clip(fig_width / sum(ratios), 2.5, 0.8 * fig_width))
+
+
 def overlay_png(result, scale: float | None = None, *, mesh: TriangleMesh | None = None,
                 views: list[View] | None = None, width_in: float = 14.0, dpi: int = 100,
                 opacity: float = 0.55) -> bytes:
@@ -296,9 +315,7 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
         pad = 0.04 * float(max(hi - lo))
         boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
         bases.append(b)
-    # panels as wide as their views at one common height (no panel squeezed into a tall, empty column)
-    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]
-    height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
+    ratios, height = _view_panels(width_in, boxes)
     fig = Figure(figsize=(width_in, height + 1.4), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
@@ -313,13 +330,7 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
         for lines, colour in ((hot_edges, HOT_COLOUR), (cold_edges, COLD_COLOUR)):
             ax.add_collection(LineCollection([(ln @ b.T)[:, :2] for ln in lines], colors=[colour],
                                              linewidths=0.9))
-        ax.set_xlim(box[0], box[1])
-        ax.set_ylim(box[2], box[3])
-        ax.set_aspect("equal")
-        ax.set_title(_view_title(view), fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.set_xlabel(f"{_axis_text(b[0])} [mm]", fontsize=8)
-        ax.set_ylabel(f"{_axis_text(b[1])} [mm]", fontsize=8)
+        _dress_view(ax, view, box)
 
     def look(colour):                       # a face's colour as the composite shows it (lit, translucent)
         return tuple(1.0 - opacity + opacity * 0.9 * np.asarray(colour))
@@ -364,8 +375,7 @@ def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list
         lo, hi = xy.min(axis=0), xy.max(axis=0)
         pad = 0.04 * float(max(hi - lo))
         boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
-    ratios = [float(np.clip((x1 - x0) / (y1 - y0), 0.75, 2.2)) for x0, x1, y0, y1 in boxes]  # as the overlay's
-    height = float(np.clip(width_in / sum(ratios), 2.5, 0.8 * width_in))
+    ratios, height = _view_panels(width_in, boxes)
     fig = Figure(figsize=(width_in, height + 0.9), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
@@ -387,13 +397,7 @@ def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list
             ax.text(*(at @ b[:2].T), str(k), ha="center", va="center", fontsize=9, fontweight="bold",
                     bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "0.3",
                           "linewidth": 0.6, "alpha": 0.9})
-        ax.set_xlim(box[0], box[1])
-        ax.set_ylim(box[2], box[3])
-        ax.set_aspect("equal")
-        ax.set_title(_view_title(view), fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.set_xlabel(f"{_axis_text(b[0])} [mm]", fontsize=8)
-        ax.set_ylabel(f"{_axis_text(b[1])} [mm]", fontsize=8)
+        _dress_view(ax, view, box)
     hidden = [k for k in range(n_faces) if k not in numbered]
     if hidden:
         title = getattr(result.part, "face_title", lambda k: "")
