@@ -287,6 +287,21 @@ def test_a_job_writes_its_viewer_files(project, capsys):
     assert "every output needs its own path" in capsys.readouterr().err
 
 
+def test_field_points_count_by_content_not_by_path(project, tmp_path_factory):
+    """A job's ``field_points`` file is one of its inputs: its content decides a rerun, its path does not (a
+    moved project folder keeps its runs, as for the hot STEP and the field)."""
+    from hot2cold.cli.options import MorphOptions
+
+    other = tmp_path_factory.mktemp("moved")
+    for folder in (project, other):
+        (folder / "nodes.bdf").write_text("GRID,1,,0.,0.,0.\n")
+    jobs = [batch.Job("a", project / "hot.step", project / "op0.csv", project / "cold" / "a.step",
+                      options=MorphOptions(field_points=folder / "nodes.bdf")) for folder in (project, other)]
+    assert batch.fingerprint(jobs[0]) == batch.fingerprint(jobs[1])
+    (other / "nodes.bdf").write_text("GRID,1,,0.,0.,1.\n")
+    assert batch.fingerprint(jobs[0]) != batch.fingerprint(jobs[1])
+
+
 def test_missing_inputs_are_refused_before_any_job_runs(project, capsys):
     """Issue 17: a jobs file naming an input that is not there is refused as a whole, at once (it was found only
     when that job ran, after the others), naming the line; nothing is written."""

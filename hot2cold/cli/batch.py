@@ -285,8 +285,9 @@ def _digest(path: Path, cache: dict | None = None) -> dict:
 def fingerprint(job: Job, cache: dict | None = None) -> dict:
     """What the job's cold part depends on: the contents of its inputs, its options, the hot2cold version.
     Paths are not part of it (a moved project folder keeps its runs).  Raises OSError for a missing input."""
-    return {"hot2cold": __version__, **{what: _digest(given, cache) for what, given in job.inputs()},
-            "options": job.options.as_dict(), "report": job.report is not None}
+    options = {k: v for k, v in job.options.as_dict().items() if k != "field_points"}   # a path: its content
+    return {"hot2cold": __version__, **{what: _digest(given, cache) for what, given in job.inputs()},  # is here
+            "options": options, "report": job.report is not None}
 
 
 def done_before(job: Job, cache: dict | None = None) -> dict | None:

@@ -156,8 +156,8 @@ class MorphOptions:
     field_points: Path | None = _option(
         None, flag="--field-points", convert=to_path, type=Path, metavar="FILE",
         help="where the node positions of a results file without them come from (.pch; .op2 without geometry; "
-        ".frd for full precision): the model (.bdf, .dat, .inp) or a field file with node ids, matched by node "
-        "number")
+        ".frd for full precision): the Nastran model (.bdf, .dat, .nas: its GRID cards) or a field file with "
+        "node ids, matched by node number")
     invert: bool = _option(
         False, flag="--invert", convert=to_flag,
         help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
