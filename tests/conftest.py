@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import shutil
 import sys
 from pathlib import Path
 
@@ -91,3 +92,27 @@ def benchmark_module(name: str):
     finally:
         sys.modules.pop(spec.name, None)
         sys.modules.pop("real_parts", None)
+
+
+#: Debian's Chromium, for the 3D report's tests.
+CHROMIUM = "chromium"
+#: What makes WebGL work in headless Chromium without a GPU: SwiftShader, allowed explicitly.
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-networking", "--disable-component-update", "--no-first-run"]
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Headless Debian Chromium through Playwright: a failure, not a skip, when either is missing."""
+    executable = "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else shutil.which(CHROMIUM)
+    if not executable:
+        pytest.fail("the 3D report test needs Chromium (Debian: apt-get install -y chromium)")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.fail("the 3D report test needs Playwright for Python: pip install playwright "
+                    "(Debian's chromium is used; no 'playwright install')")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()

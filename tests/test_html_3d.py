@@ -12,7 +12,6 @@ import base64
 import io
 import json
 import re
-import shutil
 import zlib
 from pathlib import Path
 
@@ -24,10 +23,6 @@ from hot2cold.core.model import Role
 from hot2cold.views import page as html_report
 from hot2cold.views import pictures, scene as scene_mod, viewer
 
-CHROMIUM = "chromium"
-#: What makes WebGL work in headless Chromium without a GPU: SwiftShader, allowed explicitly.
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-networking", "--disable-component-update", "--no-first-run"]
 LOCAL = ("file:", "blob:", "data:")
 
 
@@ -145,23 +140,6 @@ def test_page_without_the_view_has_no_script(blade, mesh, monkeypatch):
 
 
 # ----------------------------------------------------------------------------------------- the browser
-@pytest.fixture(scope="module")
-def browser():
-    """Headless Debian Chromium through Playwright: a failure, not a skip, when either is missing."""
-    executable = "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else shutil.which(CHROMIUM)
-    if not executable:
-        pytest.fail("the 3D report test needs Chromium (Debian: apt-get install -y chromium)")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.fail("the 3D report test needs Playwright for Python: pip install playwright "
-                    "(Debian's chromium is used; no 'playwright install')")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
-        yield browser
-        browser.close()
-
-
 class _Session:
     """One opened page with what it asked the network for and what it logged."""
 

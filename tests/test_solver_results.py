@@ -9,6 +9,8 @@ solver moved the corner nodes.  The readers themselves are checked against the s
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import re
 from pathlib import Path
@@ -38,32 +40,63 @@ def _vertices(step: Path) -> np.ndarray:
     return np.unique(np.round(np.array(points), 9), axis=0)
 
 
-@pytest.mark.parametrize("result, unit_factor", [("ansys/shell281.rst", 1000.0),
-                                                 ("nastran/solid_bending.op2", 1.0)])
-def test_morph_from_solver_results(tmp_path, capsys, result, unit_factor):
-    path = RESULTS / result
+#: The real results morphed, and the factor of their length unit to mm (the .rst says SI; the .op2 says none).
+SOLVED = {"ansys/shell281.rst": 1000.0, "nastran/solid_bending.op2": 1.0}
+
+
+@pytest.fixture(scope="module", params=sorted(SOLVED))
+def solved(request, tmp_path_factory):
+    """``hot2cold morph part.step RESULTS -o cold.step --report r.json --html r.html`` on the block the
+    results' mesh fills: (results path, its unit factor, the folder, the exit code, stderr)."""
+    path = RESULTS / request.param
+    folder = tmp_path_factory.mktemp(path.stem)
+    _block_of(read_field(path), folder / "part.step")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["morph", str(folder / "part.step"), str(path), "-o", str(folder / "cold.step"), "--report",
+                     str(folder / "report.json"), "--html", str(folder / "report.html"), "-q"])
+    return path, SOLVED[request.param], folder, code, err.getvalue()
+
+
+def test_morph_from_solver_results(solved):
+    path, unit_factor, folder, code, err = solved
+    assert code == 0, err
     field = read_field(path)
     if path.suffix == ".rst":          # SI: the file says metres, so the block is 5000 x 5000 x 10000 mm
         np.testing.assert_allclose(np.ptp(field.points, axis=0), [5000, 5000, 10000], rtol=1e-12)
-    corners = _block_of(field, tmp_path / "part.step")
-    code = main(["morph", str(tmp_path / "part.step"), str(path), "-o", str(tmp_path / "cold.step"),
-                 "--report", str(tmp_path / "report.json"), "--html", str(tmp_path / "report.html"), "-q"])
-    assert code == 0, capsys.readouterr().err
-    report = json.loads((tmp_path / "report.json").read_text())
-    page = (tmp_path / "report.html").read_text(encoding="utf-8")        # its 3D view: tests/test_html_3d.py
-    assert '<script type="application/json" id="v3-data">' in page and 'id="face-row-5"' in page
+    corners = _block_of(field, folder / "again.step")
+    report = json.loads((folder / "report.json").read_text())
     assert report["valid"] and report["delta_max"] <= 1e-3
-    checks = check_solids(read_step(tmp_path / "cold.step"))
+    checks = check_solids(read_step(folder / "cold.step"))
     assert len(checks) == 1 and checks[0].valid and checks[0].closed and checks[0].faces == 6
     # each corner node's displacement moved the block's corner with it (the solver's nodes there)
     rows = [int(np.argmin(np.linalg.norm(field.points - c, axis=1))) for c in corners]
     np.testing.assert_allclose(field.points[rows], corners, atol=1e-9 * unit_factor)
     moved = corners + field.displacements[rows]
-    cold = _vertices(tmp_path / "cold.step")
+    cold = _vertices(folder / "cold.step")
     assert len(cold) == 8
     nearest = np.array([cold[np.argmin(np.linalg.norm(cold - m, axis=1))] for m in moved])
     assert np.abs(nearest - moved).max() <= 1e-6 * max(1.0, unit_factor / 1000)
     assert np.abs(field.displacements[rows]).max() > 1e-3       # the corners did move, farther than that
+
+
+def test_the_report_page_renders_in_chromium(solved, browser):
+    """The page of each solver morph opens offline in headless Chromium (the browser of ``conftest.py``, the
+    page session of ``tests/test_html_3d.py``): its 3D view draws the block, asks the network for nothing and
+    logs no error."""
+    from test_html_3d import LOCAL, _Session, _part_mask
+
+    *_, folder, code, err = solved
+    assert code == 0, err
+    s = _Session(browser, folder / "report.html")
+    try:
+        assert s.page.get_attribute("#v3-stage", "data-ready") == "true", s.page.text_content("#v3-status")
+        rgb = s.pixels()
+        assert _part_mask(rgb[:, : int(0.8 * rgb.shape[1])]).mean() > 0.02          # the block, coloured
+        assert not s.blocked and all(url.startswith(LOCAL) for url in s.requests), s.requests
+        assert not s.errors, s.errors
+    finally:
+        s.context.close()
 
 
 def test_nastran_positions_from_the_input_deck():
