@@ -121,6 +121,30 @@ def test_field_estimator_reaches_past_a_flat_neighbourhood():
     assert not off_span(pts[idx[:1]], np.ones((1, 20), bool), on).any()
 
 
+@pytest.mark.parametrize("shape", ["spread", "plane", "line", "one point"])
+def test_linear_pinv_from_the_span_is_numpy_s(shape):
+    """The linear fit's pseudo-inverse built from the SVD of the centred offsets alone (the column of ones
+    is orthogonal to them) is the pseudo-inverse of the whole linear design, cut-off included, on full,
+    planar, collinear and single-point neighbourhoods with rows left out."""
+    from hot2cold.core.localfit import LINEAR_RCOND, Span, monomials
+
+    c, m = 50, 20
+    pts = RNG.normal(size=(c, m, 3)) * [3.0, 2.0, 1.0] + RNG.normal(size=(c, 1, 3)) * 100
+    if shape == "plane":
+        pts[..., 2] = 7.0
+    elif shape == "line":
+        pts[..., 1:] = pts[..., :1] * [0.5, -2.0]
+    elif shape == "one point":
+        pts[:] = pts[:, :1]
+    valid = RNG.random((c, m)) > 0.3
+    valid[:, :3] = True
+    span = Span.of(pts, valid)
+    design = monomials(span.offsets, 1) * valid[..., None]
+    expected = np.linalg.pinv(design, rcond=LINEAR_RCOND)
+    got = span.linear_pinv(valid.astype(float))
+    assert np.abs(got - expected).max() <= 1e-10 * np.abs(expected).max()
+
+
 def test_field_estimator_handles_coplanar_points():
     xy = RNG.uniform(0, 10, (100, 2))
     pts = np.column_stack([xy, np.full(100, 2.0)])

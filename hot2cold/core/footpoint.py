@@ -177,7 +177,7 @@ def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> n
 
 
 def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, box=None,
-                      past_border: bool = False) -> np.ndarray:
+                      past_border: bool = False, return_uv: bool = False):
     """Distances ``(m,)`` of ``points (m, 3)`` to ``surface`` by Gauss-Newton from the parameters ``uv (m, 2)``,
     kept within ``box`` ``(u0, u1, v0, v1)`` (and the domain): the smallest distance met on the way, an upper
     bound of the distance to the surface, and no larger than the start's (the local projection of eq. 21,
@@ -192,6 +192,8 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
     where that step takes it (on the surface, a residual of the step times ``|S_u|``: 2.6e-8 mm on Rotor 67's
     degree-14 faces under an exactly affine field) and not again, and its step counts as the last one.  Most
     points settle in two or three steps of the :data:`LOCAL_STEPS`.
+
+    With ``return_uv``, also the parameters ``(m, 2)`` where each point's last step took it (in the box).
     """
     points = np.asarray(points, float)
     uv = np.array(uv, float).reshape(-1, 2)
@@ -235,4 +237,4 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
         active = active[~last]
         if not len(active):
             break
-    return best
+    return (best, uv) if return_uv else best

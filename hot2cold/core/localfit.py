@@ -17,6 +17,8 @@ one.  The least squares are pseudo-inverses (batched SVD), never normal equation
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -24,6 +26,9 @@ from scipy.spatial import cKDTree
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 #: Relative cut-off of the singular values of a linear fit (pseudo-inverse).
 LINEAR_RCOND = 1e-10
+#: A neighbourhood whose offsets from its centre are all below this share of the centre's size is one point:
+#: its offsets are rounding, and a fit over them would take a gradient from noise.
+_SAME_POINT = 1e-13
 #: A node's quadratic fit is taken where the smallest singular value of its 10 columns is above this share of
 #: the largest (see :func:`node_fits`).
 NODE_RCOND = 1e-8
@@ -96,19 +101,87 @@ def evaluate_node_fits(coef: np.ndarray, scale: np.ndarray, offsets: np.ndarray)
     return np.einsum("nf,nfc->nc", monomials(offsets / scale[:, None]), coef)
 
 
+class Span(NamedTuple):
+    """The spread of neighbourhoods ``(c, m, 3)`` about their centroids, from one batched SVD: ``centre (c,
+    3)``, ``count (c,)`` the rows taken, ``scale (c,)`` (:func:`offset_scale`), the scaled offsets ``(c, m,
+    3)`` (zero rows left out) and their thin SVD ``u (c, m, 3)``, ``sigma (c, 3)``, ``vt (c, 3, 3)``."""
+
+    centre: np.ndarray
+    count: np.ndarray
+    scale: np.ndarray
+    offsets: np.ndarray
+    u: np.ndarray
+    sigma: np.ndarray
+    vt: np.ndarray
+
+    @classmethod
+    def of(cls, points: np.ndarray, valid: np.ndarray) -> Span:
+        """The span of ``points (c, m, 3)``, rows where ``valid (c, m)`` is False left out."""
+        w = valid[..., None].astype(float)
+        count = np.maximum(valid.sum(axis=1), 1)
+        centre = (points * w).sum(axis=1) / count[:, None]
+        offsets = (points - centre[:, None, :]) * w
+        # centred again, so that they sum to zero to their own rounding (not the positions'): the column of
+        # ones stays orthogonal to them however small the neighbourhood (linear_pinv relies on it)
+        shift = offsets.sum(axis=1) / count[:, None]
+        centre = centre + shift
+        offsets = (offsets - shift[:, None, :]) * w
+        # a neighbourhood that spreads by no more than the rounding of its positions is one point
+        size = np.abs(offsets).max(axis=(1, 2))
+        offsets[size <= _SAME_POINT * np.abs(centre).max(axis=1)] = 0.0
+        scale = offset_scale(offsets)
+        offsets = offsets / scale[:, None, None]
+        u, sigma, vt = np.linalg.svd(offsets, full_matrices=False)
+        return cls(centre, count, scale, offsets, u, sigma, vt)
+
+    def off(self, x: np.ndarray, share: float) -> np.ndarray:
+        """``(c,)`` bool: which points ``x (c, 3)`` lie farther than ``share`` of the neighbourhood's size
+        (its largest singular value) off its affine span, the directions in which it spreads by more than
+        ``LINEAR_RCOND`` of that size."""
+        at = (x - self.centre) / self.scale[:, None]
+        flat = self.sigma <= LINEAR_RCOND * self.sigma[:, :1]
+        along = np.einsum("cj,ckj->ck", at, self.vt) * flat                       # components off the span
+        return np.linalg.norm(along, axis=1) > share * np.maximum(self.sigma[:, 0], 1e-300)
+
+    def linear_pinv(self, valid: np.ndarray) -> np.ndarray:
+        """The pseudo-inverse ``(c, 4, m)`` of the linear monomials ``[1, offsets]`` of the rows ``valid (c,
+        m)`` (zero rows elsewhere), singular values below ``LINEAR_RCOND`` of the largest cut.  The column of
+        ones is orthogonal to the centred offsets, so its singular value is ``sqrt(count)`` and its row of the
+        pseudo-inverse is the mean; the offsets' part is ``V diag(1 / sigma) U^T`` from the span's SVD."""
+        top = np.maximum(np.sqrt(self.count), self.sigma[:, 0])
+        keep = self.sigma > LINEAR_RCOND * top[:, None]
+        inverse = np.where(keep, 1.0 / np.where(keep, self.sigma, 1.0), 0.0)      # (c, 3)
+        mean = valid / self.count[:, None]                                         # (c, m)
+        return np.concatenate([mean[:, None, :], np.einsum("cji,cj,cmj->cim", self.vt, inverse, self.u)], axis=1)
+
+
+class LocalFit(NamedTuple):
+    """What :func:`fits_at` gives at each point: the linear fit's value ``linear (c, 3)``, the quadratic
+    ``correction (c, 3)`` to it, the ``trust (c,)`` in 0..1 of that correction, and (when asked for) whether
+    the point lies ``off_span (c,)`` of its neighbourhood (:meth:`Span.off`), else None."""
+
+    linear: np.ndarray
+    correction: np.ndarray
+    trust: np.ndarray
+    off_span: np.ndarray | None = None
+
+
 def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.ndarray,
-            quadratic: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            quadratic: bool, span_share: float | None = None) -> LocalFit:
     """Least-squares polynomials over the neighbourhoods ``points (c, m, 3)`` with ``values (c, m, 3)``, rows
-    where ``valid (c, m)`` is False left out, at ``x (c, 3)``: the linear fit's value ``(c, 3)``, the quadratic
-    correction to it ``(c, 3)`` (zero if not ``quadratic``) and the trust ``(c,)`` in 0..1 of that correction.
+    where ``valid (c, m)`` is False left out, at ``x (c, 3)``: a :class:`LocalFit` of the linear fit's value
+    ``(c, 3)``, the quadratic correction to it ``(c, 3)`` (zero if not ``quadratic``) and the trust ``(c,)`` in
+    0..1 of that correction; with ``span_share``, also which points lie off their neighbourhood's span by
+    more than that share of its size (from the same SVD).
 
     Offsets are taken from each neighbourhood's centroid and scaled to at most 1.  The linear part is fitted
-    first, by the pseudo-inverse (batched SVD): foot points on a plane make it rank-deficient, and the
-    pseudo-inverse then gives no gradient across the plane.  The quadratic terms, made orthogonal to the
-    linear ones, then fit what the linear part leaves (together the two steps are the least-squares quadratic,
-    Frisch-Waugh-Lovell), with their own cut-off ``QUADRATIC_RCOND``: foot points along a curve or on a nearly
-    flat patch leave some quadratic combinations barely determined, and those are dropped rather than fitted to
-    rounding.  An affine field leaves nothing to the quadratic terms, so it is reproduced exactly.
+    first, by the pseudo-inverse (batched SVD of the centred offsets, :class:`Span`): foot points on a plane
+    make it rank-deficient, and the pseudo-inverse then gives no gradient across the plane.  The quadratic
+    terms, made orthogonal to the linear ones, then fit what the linear part leaves (together the two steps
+    are the least-squares quadratic, Frisch-Waugh-Lovell), with their own cut-off ``QUADRATIC_RCOND``: foot
+    points along a curve or on a nearly flat patch leave some quadratic combinations barely determined, and
+    those are dropped rather than fitted to rounding.  An affine field leaves nothing to the quadratic terms,
+    so it is reproduced exactly.
 
     The quadratic correction is trusted only as far as the field is quadratic over the neighbourhood: the
     trust is 1 where the quadratic terms leave less than ``TRUSTED`` of the linear fit's residual (rms), 0
@@ -117,21 +190,19 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     whose hub is clamped, leaves 5 to 90 %: extrapolated 10 to 25 mm over the hub's trimmed-away part, its
     quadratic terms gave displacements of 0.1 to 0.5 mm where the hub and every node on it stay put.
     """
+    span = Span.of(points, valid)
     w = valid[..., None].astype(float)
-    count = np.maximum(valid.sum(axis=1), 1)[:, None]
-    centre = (points * w).sum(axis=1) / count
-    offsets = (points - centre[:, None, :]) * w
-    scale = offset_scale(offsets)
-    offsets = offsets / scale[:, None, None]
-    at = (x - centre) / scale[:, None]
+    offsets = span.offsets
+    at = (x - span.centre) / span.scale[:, None]
     values = values * w
     linear = monomials(offsets, 1) * w                                          # (c, m, 4)
-    linear_pinv = np.linalg.pinv(linear, rcond=LINEAR_RCOND)                    # (c, 4, m)
+    linear_pinv = span.linear_pinv(valid.astype(float))                         # (c, 4, m)
     coef = linear_pinv @ values                                                 # (c, 4, 3)
     at_linear = monomials(at, 1)                                                # (c, 4)
     out = np.einsum("ct,ctj->cj", at_linear, coef)
+    off = None if span_share is None else span.off(x, span_share)
     if not quadratic:
-        return out, np.zeros_like(out), np.zeros(len(out))
+        return LocalFit(out, np.zeros_like(out), np.zeros(len(out)), off)
     square = _squares(offsets)                                                  # (c, m, 6)
     carried = linear_pinv @ square                                              # (c, 4, 6)
     square = square - linear @ carried                                          # orthogonal to the linear part
@@ -144,7 +215,7 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     before = (residual ** 2).sum(axis=(1, 2))
     left = np.sqrt(np.maximum(before - (projected ** 2).sum(axis=(1, 2)), 0.0) / np.maximum(before, 1e-300))
     trust = np.clip(np.log(UNTRUSTED / np.maximum(left, 1e-300)) / np.log(UNTRUSTED / TRUSTED), 0.0, 1.0)
-    return out, np.einsum("cj,cjk->ck", gain, projected), trust
+    return LocalFit(out, np.einsum("cj,cjk->ck", gain, projected), trust, off)
 
 
 #: The median of the chi-square distribution with 3 degrees of freedom: ``|r|^2 / sigma^2`` of a vector ``r``

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..core.localfit import LINEAR_RCOND, fits_at
+from ..core.localfit import Span, fits_at
 
 #: A point whose nearest foot point is ``rho`` away fits its quadratic over the foot points within
 #: ``REACH * rho`` and its linear fit over those within ``LINEAR_REACH * rho``, when that ball holds more than
@@ -54,15 +54,9 @@ OFF_SPAN = 1e-9
 def off_span(points: np.ndarray, valid: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``(c,)`` bool: which of the points ``x (c, 3)`` lie off the affine span (a plane, a line) of their
     neighbourhoods ``points (c, m, 3)`` (rows where ``valid (c, m)`` is False left out), so that a linear fit
-    over the neighbourhood cannot tell the field's change towards them."""
-    w = valid[..., None].astype(float)
-    count = np.maximum(valid.sum(axis=1), 1)[:, None]
-    centre = (points * w).sum(axis=1) / count
-    offsets = (points - centre[:, None, :]) * w
-    _, sigma, vt = np.linalg.svd(offsets, full_matrices=False)                  # (c, 3), (c, 3, 3)
-    kept = sigma > LINEAR_RCOND * sigma[:, :1]
-    along = np.einsum("cj,ckj->ck", x - centre, vt) * ~kept                      # components off the span
-    return np.linalg.norm(along, axis=1) > OFF_SPAN * np.maximum(sigma[:, 0], 1e-300)
+    over the neighbourhood cannot tell the field's change towards them (:meth:`Span.off` with
+    :data:`OFF_SPAN`; :func:`fits_at` tells it from the same SVD as its fit)."""
+    return Span.of(points, valid).off(x, OFF_SPAN)
 
 
 class FieldEstimator:
@@ -147,18 +141,19 @@ class FieldEstimator:
             xs = x[start:start + chunk]
             dist, idx = self._tree.query(xs, k=self._k)
             every = np.ones(idx.shape, bool)
-            linear, correction, trust = fits_at(self._points[idx], self._disp[idx], every, xs, self._quadratic)
-            flat = off_span(self._points[idx], every, xs)
+            linear, correction, trust, flat = fits_at(self._points[idx], self._disp[idx], every, xs,
+                                                      self._quadratic, OFF_SPAN)
             quadratic = linear + correction
             far = np.nonzero(LINEAR_REACH * dist[:, 0] > dist[:, -1])[0]
             if len(far):
                 wide, valid = self._wide(xs[far], LINEAR_REACH * dist[far, 0])
-                linear[far] = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False)[0]
-                flat[far] = off_span(self._points[wide], valid, xs[far])
+                fit = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False, OFF_SPAN)
+                linear[far], flat[far] = fit.linear, fit.off_span
             far = np.nonzero(REACH * dist[:, 0] > dist[:, -1])[0]
             if self._quadratic and len(far):
                 wide, valid = self._wide(xs[far], REACH * dist[far, 0])
-                base, correction, trust[far] = fits_at(self._points[wide], self._disp[wide], valid, xs[far], True)
+                base, correction, trust[far], _ = fits_at(self._points[wide], self._disp[wide], valid, xs[far],
+                                                          True)
                 quadratic[far] = base + correction
             out[start:start + chunk] = linear + trust[:, None] * (quadratic - linear)
             flat = np.flatnonzero(flat)
@@ -181,10 +176,11 @@ class FieldEstimator:
             k = min(4 * k, len(self._points))
             dist, _ = self._tree.query(x[pending], k=k)
             wide, valid = self._wide(x[pending], dist[:, -1] * (1 + 1e-12))
-            out[pending] = fits_at(self._points[wide], self._disp[wide], valid, x[pending], False)[0]
+            fit = fits_at(self._points[wide], self._disp[wide], valid, x[pending], False, OFF_SPAN)
+            out[pending] = fit.linear
             if k == len(self._points):
                 break
-            pending = pending[off_span(self._points[wide], valid, x[pending])]
+            pending = pending[fit.off_span]
         return out
 
 

@@ -47,7 +47,7 @@ from ..kernel.tolerances import fit_tolerances
 from ..kernel.shapes import to_cadquery
 from ..kernel.step import write_step
 from .load import element_points, load_part
-from ..core.bspline import BSplineCurve, BSplineSurface
+from ..core.bspline import BSplineCurve, BSplineSurface, clip_uv, evaluate_surface
 from ..core.footpoint import surface_distances
 from ..core.domain import Trim
 from ..core.localfit import scatter
@@ -189,6 +189,9 @@ class MorphContext:
     #: every trial, and a fit's distance costs as much as a trial's (keys hold the objects, so no id is
     #: reused while the context lives).
     _distances: dict = dataclass_field(default_factory=dict, init=False, repr=False)
+    #: The parameters where :meth:`field_distance` found the distances of a fit G1 or G2 may replace (by the
+    #: same keys), for :meth:`_distance_bound`; only for those, since each holds a pair per node.
+    _feet: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
     def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
@@ -486,20 +489,42 @@ class MorphContext:
         return f"turning edge {e} would take it {now.max():.2g} mm off its nodes (tolerance {limit:g} mm, " \
                f"{was.max():.2g} before)"
 
-    def field_distance(self, k: int, surface: BSplineSurface, grid: FaceGrid) -> float:
-        """The largest distance (mm) from a morphed ``surface`` of face ``k`` to its nodes' cold targets
-        (eq. 21) and to the field's estimate over its ``grid`` (0 where it has neither)."""
-        key = (k, surface, grid)
-        if key in self._distances:
-            return self._distances[key]
+    def _targets(self, k: int, grid: FaceGrid) -> tuple[np.ndarray, np.ndarray]:
+        """Where face ``k`` should pass, ``(m, 3)``: its nodes' cold targets (eq. 21) and the field's estimate
+        over its ``grid``; and the hot parameters ``(m, 2)`` of those points."""
         nodes = self.classification.nodes_of(Role.FACE, k)
-        targets = np.concatenate([self.classification.foot[nodes] + self.field.displacements[nodes],
-                                  grid.expected])
-        uv = np.concatenate([self.classification.uv[nodes], grid.uv])
-        distance = 0.0 if not len(uv) else \
-            float(surface_distances(surface, targets, uv, self.part.faces[k].uv_box, past_border=True).max())
+        return (np.concatenate([self.classification.foot[nodes] + self.field.displacements[nodes], grid.expected]),
+                np.concatenate([self.classification.uv[nodes], grid.uv]))
+
+    def field_distance(self, k: int, surface: BSplineSurface, grid: FaceGrid, keep_feet: bool = False) -> float:
+        """The largest distance (mm) from a morphed ``surface`` of face ``k`` to its nodes' cold targets
+        (eq. 21) and to the field's estimate over its ``grid`` (0 where it has neither).  ``keep_feet``: the
+        parameters where the distances were found are kept for :meth:`_distance_bound`."""
+        key = (k, surface, grid)
+        if key in self._distances and (not keep_feet or key in self._feet):
+            return self._distances[key]
+        targets, uv = self._targets(k, grid)
+        distance, feet = 0.0, uv
+        if len(uv):
+            found, feet = surface_distances(surface, targets, uv, self.part.faces[k].uv_box, past_border=True,
+                                            return_uv=True)
+            distance = float(found.max())
         self._distances[key] = distance
+        if keep_feet:
+            self._feet[key] = feet
         return distance
+
+    def _distance_bound(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid) -> float:
+        """An upper bound (mm) of the distance of ``after`` from the points of :meth:`field_distance`: the
+        largest distance of each point from ``after`` at the parameters where it was found on ``before``
+        (a point on the surface is no nearer than its foot).  One evaluation per point instead of a
+        projection; ``inf`` where ``before``'s parameters were not kept."""
+        feet = self._feet.get((k, before, grid))
+        if feet is None or not len(feet):
+            return np.inf if feet is None else 0.0
+        targets, _ = self._targets(k, grid)
+        feet = clip_uv(after, feet)
+        return float(np.linalg.norm(targets - evaluate_surface(after, feet[:, 0], feet[:, 1]), axis=1).max())
 
     def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
                    share: float | None = None, verb: str = "turning", floor: float | None = None) -> str:
@@ -514,9 +539,12 @@ class MorphContext:
         limit = self.settings.tolerance
         if limit is None:
             return ""
-        was, now = self.field_distance(k, before, grid), self.field_distance(k, after, grid)
+        was = self.field_distance(k, before, grid, keep_feet=True)
         allowed = max(limit, was) if share is None else \
             max((1.0 + share) * was, (share if floor is None else floor) * limit)
+        if self._distance_bound(k, before, after, grid) <= allowed:
+            return ""                   # within reach for certain, without projecting every point again
+        now = self.field_distance(k, after, grid)
         if now <= allowed:
             return ""
         return (f"{verb} face {k} would take it {now:.2g} mm off the field ({allowed:.2g} mm allowed, "
