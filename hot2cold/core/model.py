@@ -251,13 +251,13 @@ class Classification:
         """Distance (mm) from each used node's foot point to the nearest other foot point ``(N,)`` (NaN for
         unused nodes, and for all where fewer than two foot points are distinct): the field's node spacing
         there.  Nodes that share a foot point count once."""
-        from scipy.spatial import cKDTree
+        from .trees import kd_tree
 
         used = np.flatnonzero(self.used)
         nearest = np.full(len(self.role), np.nan)
         feet = np.unique(self.foot[used], axis=0)
         if len(feet) > 1:
-            nearest[used] = cKDTree(feet).query(self.foot[used], k=2, workers=-1)[0][:, 1]
+            nearest[used] = kd_tree(feet).query(self.foot[used], k=2, workers=-1)[0][:, 1]
         return nearest
 
     def spacing(self, nodes: np.ndarray | None = None) -> float:

@@ -398,7 +398,7 @@ def merge_duplicates(field: DisplacementField) -> DisplacementField:
     """
     from scipy.sparse import coo_array
     from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from ..core.trees import kd_tree
 
     n = len(field)
     if n < 2:
@@ -407,7 +407,7 @@ def merge_duplicates(field: DisplacementField) -> DisplacementField:
     extent = float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
     tol = DUPLICATE_RTOL * extent
     if tol > 0:
-        pairs = cKDTree(p, balanced_tree=False, compact_nodes=False).query_pairs(tol, output_type="ndarray")
+        pairs = kd_tree(p).query_pairs(tol, output_type="ndarray")
     else:  # every node at one point
         pairs = np.column_stack([np.zeros(n - 1, np.int64), np.arange(1, n)])
     if not len(pairs):

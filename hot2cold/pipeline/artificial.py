@@ -28,9 +28,9 @@ polynomials over foot points around it instead:
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core.localfit import Span, fits_at
+from ..core.trees import kd_tree
 
 #: A point whose nearest foot point is ``rho`` away fits its quadratic over the foot points within
 #: ``REACH * rho`` and its linear fit over those within ``LINEAR_REACH * rho``, when that ball holds more than
@@ -40,9 +40,6 @@ REACH, LINEAR_REACH = 3.0, 1.5
 MAX_NEIGHBOURS = 100
 #: Fewest neighbours for a quadratic fit (10 coefficients); with fewer the fit is linear (4 coefficients).
 _QUADRATIC_MIN = 10
-#: k-d trees split at the sliding midpoint and keep their nodes' boxes as split: with a million foot points
-#: they build in a third of the time of the default (median splits, shrunk boxes), and queries are as fast.
-_TREE = {"balanced_tree": False, "compact_nodes": False}
 
 
 #: A point lies off the span of its neighbourhood when it is farther than this share of the neighbourhood's
@@ -70,9 +67,11 @@ class FieldEstimator:
     neighbours : int, how many nearest foot points an estimate among the data uses (more where the point
         is far from the data, see the module docstring).  With fewer than 10 the fit is linear, with fewer
         than 4 the nearest foot point's displacement is taken.
+    tree : a k-d tree over exactly ``points`` the caller has already (:func:`hot2cold.core.trees.kd_tree`),
+        or None: one is built.
     """
 
-    def __init__(self, points: np.ndarray, displacements: np.ndarray, neighbours: int = 20):
+    def __init__(self, points: np.ndarray, displacements: np.ndarray, neighbours: int = 20, tree=None):
         points = np.asarray(points, float)
         displacements = np.asarray(displacements, float)
         if points.ndim != 2 or points.shape[1] != 3 or displacements.shape != points.shape:
@@ -84,7 +83,9 @@ class FieldEstimator:
         self._disp = displacements
         self._k = min(neighbours, len(points))
         self._quadratic = self._k >= _QUADRATIC_MIN
-        self._tree = cKDTree(points, **_TREE)
+        if tree is not None and tree.n != len(points):
+            raise ValueError(f"the tree holds {tree.n} points, but {len(points)} points were given")
+        self._tree = kd_tree(points) if tree is None else tree
         # Thinned copies for wide neighbourhoods: level L holds the first n / 2**L foot points of a fixed random
         # order, so each level is a random half of the one before.
         order = np.random.default_rng(0).permutation(len(points))
@@ -94,7 +95,7 @@ class FieldEstimator:
         size = len(points) // 2
         while size >= MAX_NEIGHBOURS:
             keep = np.sort(order[:size])
-            self._levels.append((keep, cKDTree(points[keep], **_TREE)))
+            self._levels.append((keep, kd_tree(points[keep])))
             size //= 2
 
     def _wide(self, x: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

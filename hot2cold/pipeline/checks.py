@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.trees import kd_tree
 from ..core.bspline import (NORMAL_RTOL, evaluate_curve, evaluate_surface, knot_breaks, surface_basis,
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
@@ -303,7 +304,7 @@ class FieldScale:
         strain = 0.0
         if len(points) > 1:
             k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
-            d, j = cKDTree(points).query(points, k=k, workers=-1)
+            d, j = kd_tree(points).query(points, k=k, workers=-1)
             du = np.linalg.norm(disp[j[:, 1:]] - disp[:, None, :], axis=2)
             apart = d[:, 1:] > 0           # the rows of one node that feeds two solids are one point
             strain = float((du[apart] / d[:, 1:][apart]).max()) if apart.any() else 0.0
@@ -439,7 +440,7 @@ class _FaceNodes:
                                     + [classification.nodes_of(Role.VERTEX, v) for v in sorted(vertices)])
         self.reach = GRID_REACH * classification.spacing(self.nodes)
         self._foot = classification.foot[self.nodes]
-        self.tree = cKDTree(self._foot) if len(self.nodes) else None
+        self.tree = kd_tree(self._foot) if len(self.nodes) else None
         self.own = len(classification.nodes_of(Role.FACE, face.index)) >= _FACE_ESTIMATE_MIN
         self._displacements = field.displacements[self.nodes]
         self._neighbours = neighbours
@@ -452,7 +453,7 @@ class _FaceNodes:
         if self._local is None:
             from .artificial import FieldEstimator
 
-            self._local = FieldEstimator(self._foot, self._displacements, self._neighbours)
+            self._local = FieldEstimator(self._foot, self._displacements, self._neighbours, tree=self.tree)
         return self._local
 
     def misses(self, asked: np.ndarray) -> np.ndarray:
@@ -595,7 +596,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
         t = np.unique(np.concatenate([np.linspace(a, b, min(per_span, _CHECK_MOST) + 1)
                                       for a, b in zip(breaks[:-1], breaks[1:])]))
         hot = evaluate_curve(curve, t)
-        tree = cKDTree(classification.foot[nodes])
+        tree = kd_tree(classification.foot[nodes])
         near = tree.query(hot, distance_upper_bound=reach)[0] < np.inf
         if not near.any():
             grids.append(empty)

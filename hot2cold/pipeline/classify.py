@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.trees import kd_tree
 from ..core.bspline import (bend_parameters, evaluate_curve, evaluate_surface, grid_points, polyline_length,
                             surface_normals)
 from ..io.field import DisplacementField
@@ -197,7 +198,7 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
     surface = face.surface
     grid, grid_uv = start_grid(face, spacing)
     k = min(_FAR_SIDE_STARTS, len(grid))
-    _, near = cKDTree(grid).query(points, k=k, workers=-1)
+    _, near = kd_tree(grid).query(points, k=k, workers=-1)
     near = near.reshape(len(points), k)
     fp = project_to_surface(surface, points, grid_uv[near[:, 0]], box)
     used = np.zeros(len(grid), bool)                          # the normals of those starts only
