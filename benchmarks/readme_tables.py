@@ -91,12 +91,9 @@ def g1_table() -> str:
 
     block = read_step(SAMPLES / "filleted_block.step")
     nodes = fe_surface_nodes(block, 1.5, seed=2)[0]            # the node set of tests/test_g1.py
-    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
 
     def untwist(rate):
-        field = UntwistField(axis_point=tuple((lo + hi) / 2), untwist_deg_per_mm=rate, stretch_per_mm2=1e-4,
-                             z0=float(lo[2]))
-        return nodes, field(nodes)
+        return nodes, UntwistField.over(nodes, rate, 1e-4)(nodes)
 
     cases = [("twisted blade, bundled field", SAMPLES / "twisted_blade.step", SAMPLES / "twisted_blade_field.csv"),
              ("filleted block, untwist 0.03°/mm + z² stretch", block, untwist(0.03)),

@@ -309,9 +309,7 @@ def test_zero_kink_added_moves_no_corner(blade_part):
 
 def _untwist(nodes, rate, stretch):
     from hot2cold.testing.synthetic import UntwistField
-    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
-    return UntwistField(axis_point=tuple((lo + hi) / 2), untwist_deg_per_mm=rate, stretch_per_mm2=stretch,
-                        z0=float(lo[2]))
+    return UntwistField.over(nodes, rate, stretch)
 
 
 def _morph_with_and_without_g1(shape, field):

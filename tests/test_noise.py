@@ -28,9 +28,7 @@ def noisy_rotor():
     hot = read_step(SAMPLES / "rotor37_blade.step")
     surface = fe_surface_nodes(hot, 1.0, seed=0)[0]
     points = np.concatenate([surface, volume_nodes(hot, len(surface) // 3, seed=0, margin=0.05)])
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    field = UntwistField(axis_point=(lo + hi) / 2, span_axis=(0.0, 0.0, 1.0), untwist_deg_per_mm=0.02,
-                         stretch_per_mm2=1e-3, z0=float(lo[2]))
+    field = UntwistField.over(points, 0.02, 1e-3)
     noisy = field(points) + np.random.default_rng(7).normal(0.0, NOISE, points.shape)
     return hot, points, noisy, field
 

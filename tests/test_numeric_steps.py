@@ -114,11 +114,12 @@ def test_field_estimator_reaches_past_a_flat_neighbourhood():
     est = FieldEstimator(pts, pts @ A.T + B - pts, neighbours=20)
     beside = np.array([[5.0, 5.0, 3.0], [2.0, 8.0, -2.0]])
     assert np.abs(est(beside) - (beside @ A.T + B - beside)).max() <= 1e-10
-    from hot2cold.pipeline.artificial import off_span
+    from hot2cold.core.localfit import Span
+    from hot2cold.pipeline.artificial import OFF_SPAN
     _, idx = cKDTree(pts).query(beside, k=20)
-    assert off_span(pts[idx], np.ones(idx.shape, bool), beside).all()          # what the wider fit is for
+    assert Span.of(pts[idx], np.ones(idx.shape, bool)).off(beside, OFF_SPAN).all()   # what the wider fit is for
     on = np.array([[5.0, 5.0, 0.0]])
-    assert not off_span(pts[idx[:1]], np.ones((1, 20), bool), on).any()
+    assert not Span.of(pts[idx[:1]], np.ones((1, 20), bool)).off(on, OFF_SPAN).any()
 
 
 @pytest.mark.parametrize("shape", ["spread", "plane", "line", "one point"])

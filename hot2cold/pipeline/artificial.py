@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.localfit import Span, fits_at
+from ..core.localfit import fits_at
 from ..core.trees import kd_tree
 
 #: A point whose nearest foot point is ``rho`` away fits its quadratic over the foot points within
@@ -46,14 +46,6 @@ _QUADRATIC_MIN = 10
 #: size from the affine span of the foot points (the directions in which they spread by more than the linear
 #: fit's cut-off, :data:`hot2cold.core.localfit.LINEAR_RCOND`).
 OFF_SPAN = 1e-9
-
-
-def off_span(points: np.ndarray, valid: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``(c,)`` bool: which of the points ``x (c, 3)`` lie off the affine span (a plane, a line) of their
-    neighbourhoods ``points (c, m, 3)`` (rows where ``valid (c, m)`` is False left out), so that a linear fit
-    over the neighbourhood cannot tell the field's change towards them (:meth:`Span.off` with
-    :data:`OFF_SPAN`; :func:`fits_at` tells it from the same SVD as its fit)."""
-    return Span.of(points, valid).off(x, OFF_SPAN)
 
 
 class FieldEstimator:

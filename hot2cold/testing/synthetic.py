@@ -119,6 +119,15 @@ class UntwistField:
             if not np.isfinite(getattr(self, name)):
                 raise ValueError(f"{name} must be finite")
 
+    @classmethod
+    def over(cls, points, untwist_deg_per_mm: float, stretch_per_mm2: float) -> UntwistField:
+        """The untwist along z of the part ``points (N, 3)`` spread over: about the vertical line through the
+        centre of their bounding box, nothing moving at their lowest z (the hub)."""
+        p = _points(points)
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        return cls(axis_point=(lo + hi) / 2, untwist_deg_per_mm=untwist_deg_per_mm,
+                   stretch_per_mm2=stretch_per_mm2, z0=float(lo[2]))
+
     def exact_map(self, points) -> np.ndarray:
         """Displaced positions ``(N, 3)`` of ``points (N, 3)``."""
         p = _points(points)

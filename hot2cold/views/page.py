@@ -246,14 +246,13 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
 
     largest = report.max_displacement
     figures = [
+        f'<figure>{_img(numbers, "the faces and their numbers")}<figcaption>Figure 0. The hot part with the '
+        f"number of each face, as the tables name them (a colour per face).</figcaption></figure>",
         f'<figure>{_img(overlay, "hot and cold part overlaid")}<figcaption>Figure 1. Hot part (red) and cold '
         f'part (blue) overlaid, as in the paper\'s Fig. 8 and 10. The displacement is drawn '
         f'<b>{scale:.3g} times</b> its size: the largest displacement, {largest:.4g} mm, appears as '
         f'{largest * scale:.4g} mm (part diagonal {result.part.diagonal:.4g} mm). Faces are translucent, '
         f'edges drawn as lines.</figcaption></figure>']
-    figures.insert(0,
-        f'<figure>{_img(numbers, "the faces and their numbers")}<figcaption>Figure 0. The hot part with the '
-        f"number of each face, as the tables name them (a colour per face).</figcaption></figure>")
     if errors is not None:
         left_out = len([f for f in report.faces if f.nodes > 0]) - len(error_faces)
         more = f" {left_out} faces with fewer nodes are not drawn." if left_out > 0 else ""

@@ -272,6 +272,22 @@ def _dress_view(ax, view: View, box) -> None:
     ax.set_ylabel(f"{_axis_text(up)} [mm]", fontsize=8)
 
 
+def _view_box(xy: np.ndarray) -> tuple[float, float, float, float]:
+    """The box ``(x0, x1, y0, y1)`` a view's panel shows of the projected points ``xy (n, 2)``: their extent and
+    4 % of its larger side around it."""
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pad = 0.04 * float(max(hi - lo))
+    return (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad)
+
+
+def _raster_size(box, height: float, dpi: int) -> tuple[int, int]:
+    """Pixels ``(w, h)`` of a shaded layer showing ``box`` in a panel ``height`` inches high at ``dpi``."""
+    ratio = (box[3] - box[2]) / (box[1] - box[0])
+    panel_px = int(1.5 * dpi * max(height, height / ratio))
+    return (panel_px, max(8, int(round(panel_px * ratio)))) if ratio <= 1 else \
+        (max(8, int(round(panel_px / ratio))), panel_px)
+
+
 def _view_panels(fig_width: float, boxes: list) -> tuple[list[float], float]:
     """The width ratios of panels showing ``boxes`` side by side, as wide as their views at one common
     height (no panel squeezed into a tall, empty column), and that height (inches) for ``fig_width``."""
@@ -307,23 +323,14 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
     cold_edges = [h + scale * (c - h) for h, c in zip(hot_edges, cold_edges)]
     views = views if views is not None else default_views(hot)
 
-    boxes, bases = [], []
-    for view in views:
-        b = view.basis()
-        allp = np.concatenate([hot @ b[:2].T, cold @ b[:2].T])
-        lo, hi = allp.min(axis=0), allp.max(axis=0)
-        pad = 0.04 * float(max(hi - lo))
-        boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
-        bases.append(b)
+    bases = [view.basis() for view in views]
+    boxes = [_view_box(np.concatenate([hot @ b[:2].T, cold @ b[:2].T])) for b in bases]
     ratios, height = _view_panels(width_in, boxes)
     fig = Figure(figsize=(width_in, height + 1.4), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, len(views), squeeze=False, width_ratios=ratios)[0]
     for ax, view, b, box in zip(axes, views, bases, boxes):
-        ratio = (box[3] - box[2]) / (box[1] - box[0])
-        panel_px = int(1.5 * dpi * max(height, height / ratio))
-        size = (panel_px, max(8, int(round(panel_px * ratio)))) if ratio <= 1 else \
-            (max(8, int(round(panel_px / ratio))), panel_px)
+        size = _raster_size(box, height, dpi)
         layers = [_shaded_layer(pts, mesh.triangles, b, colour, box, size)
                   for pts, colour in ((hot, HOT_COLOUR), (cold, COLD_COLOUR))]
         ax.imshow(_composite(layers, opacity), extent=box, origin="upper", interpolation="antialiased")
@@ -348,11 +355,11 @@ def overlay_figure(result, scale: float | None = None, *, mesh: TriangleMesh | N
 def face_numbers_png(result, *, mesh: TriangleMesh | None = None, views: list[View] | None = None,
                      width_in: float = 14.0, dpi: int = 100) -> bytes:
     """The hot part with each face's number on it (:func:`face_numbers_figure`).  Returns PNG bytes."""
-    return _png(face_numbers_figure(result, mesh=mesh, views=views, width_in=width_in), dpi)
+    return _png(face_numbers_figure(result, mesh=mesh, views=views, width_in=width_in, dpi=dpi), dpi)
 
 
 def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list[View] | None = None,
-                        width_in: float = 14.0) -> Figure:
+                        width_in: float = 14.0, dpi: int = 100) -> Figure:
     """The hot part, each face in a colour of its own and its number written on it, a panel per view
     (default :func:`default_views`), so that the report's rows ("face 3") can be found on the part.
 
@@ -369,12 +376,7 @@ def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list
     centre = tri.mean(axis=1)                                                    # (T, 3)
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])              # (T, 3), 2 x area, outward
     n_faces = len(result.part.faces)
-    boxes = []
-    for view in views:
-        xy = points @ view.basis()[:2].T
-        lo, hi = xy.min(axis=0), xy.max(axis=0)
-        pad = 0.04 * float(max(hi - lo))
-        boxes.append((lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad))
+    boxes = [_view_box(points @ view.basis()[:2].T) for view in views]
     ratios, height = _view_panels(width_in, boxes)
     fig = Figure(figsize=(width_in, height + 0.9), layout="constrained")
     FigureCanvasAgg(fig)
@@ -382,9 +384,7 @@ def face_numbers_figure(result, *, mesh: TriangleMesh | None = None, views: list
     numbered: set[int] = set()
     for ax, view, box in zip(axes, views, boxes):
         b = view.basis()
-        ratio = (box[3] - box[2]) / (box[1] - box[0])
-        px = 600
-        size = (px, max(8, int(px * ratio))) if ratio <= 1 else (max(8, int(px / ratio)), px)
+        size = _raster_size(box, height, dpi)
         facing = np.maximum(cross @ b[2], 0.0)                                   # projected area towards us
         front = facing > 0.0                       # back faces culled: a thin part's far side shows no speckle
         ax.imshow(_shaded_layer(points, triangles[front], b, colours[front], box, size), extent=box,
