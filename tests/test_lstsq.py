@@ -499,3 +499,66 @@ def test_the_fast_path_holds_for_any_number_of_unknowns(n):
 def test_full_svd_up_to_must_not_be_negative():
     with pytest.raises(ValueError, match="full_svd_up_to"):
         solve_tsvd(np.eye(3), np.ones(3), full_svd_up_to=-1)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Steering rows: in the least squares, not in the cut-off
+# ----------------------------------------------------------------------------------------------------------
+
+def _steered_problem(seed: int, rows: int = 300, n: int = 24, weak: float = 1e-5):
+    """``rows`` data rows of ``n`` unknowns whose last column is ``weak`` (above the data's cut-off
+    ``n FLT_EPSILON``, 2.9e-6 of ``sigma_1``), and 6 steering rows 1000 times heavier on the first columns."""
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(rows, n))
+    a[rng.random(a.shape) < 0.6] = 0.0
+    a += np.eye(rows, n)
+    a[:, -1] *= weak
+    e = np.zeros((6, n))
+    e[:, :6] = 1e3 * rng.normal(size=(6, 6))
+    return rng, a, rng.normal(size=(rows, 3)), e, rng.normal(size=(6, 3))
+
+
+@pytest.mark.parametrize("fmt", ["dense", "csr"])
+@pytest.mark.parametrize("full_svd_up_to", [0, 1000])
+@pytest.mark.parametrize("rows", [300, 20, 10])     # tall, tall with the steering rows only, wide
+def test_steering_rows_enter_the_fit_but_not_the_cutoff(fmt, full_svd_up_to, rows):
+    _, a, b, e, f = _steered_problem(31, rows)
+    n = a.shape[1]
+    stacked, rhs = np.vstack([a, e]), np.vstack([b, f])
+    sol = solve_tsvd(_as_format(a, fmt), b, steer=(_as_format(e, fmt), f), full_svd_up_to=full_svd_up_to)
+    sigma_data = np.linalg.svd(a, compute_uv=False)[0]
+    assert sol.cutoff == pytest.approx(sigma_data * n * FLT_EPSILON, rel=1e-7)
+    # nothing the data determine is dropped: the least-squares solution of the stacked rows
+    if rows > n:
+        assert sol.rank == n
+        np.testing.assert_allclose(sol.x, np.linalg.lstsq(stacked, rhs, rcond=None)[0], rtol=0,
+                                   atol=1e-8 * np.abs(sol.x).max())
+        assert (sol.singular_values is None) == (full_svd_up_to == 0)
+    # the same rows as data raise sigma_1 a thousandfold, and the cut-off drops the weak column
+    as_data = solve_tsvd(stacked, rhs, full_svd_up_to=full_svd_up_to)
+    assert as_data.cutoff > 100 * sol.cutoff
+    if rows > n:
+        assert as_data.rank == n - 1
+
+
+def test_steering_rows_alone_and_without_data():
+    rng = np.random.default_rng(32)
+    e, f = rng.normal(size=(40, 5)), rng.normal(size=40)
+    sol = solve_tsvd(np.zeros((0, 5)), np.zeros(0), steer=(e, f))
+    np.testing.assert_allclose(sol.x, np.linalg.lstsq(e, f, rcond=None)[0], rtol=0, atol=1e-12)
+    assert sol.x.shape == (5,) and sol.rank == 5
+    # an empty steer changes nothing
+    a, b = rng.normal(size=(30, 5)), rng.normal(size=(30, 2))
+    np.testing.assert_array_equal(solve_tsvd(a, b, steer=(np.zeros((0, 5)), np.zeros((0, 2)))).x, solve_tsvd(a, b).x)
+
+
+def test_steering_rows_are_checked():
+    a, b = np.eye(6, 4), np.ones((6, 2))
+    with pytest.raises(ValueError, match=r"steer must be rows \(m, 4\) and right-hand sides \(m, 2\)"):
+        solve_tsvd(a, b, steer=(np.ones((3, 5)), np.ones((3, 2))))
+    with pytest.raises(ValueError, match=r"steer must be rows"):
+        solve_tsvd(a, b, steer=(np.ones((3, 4)), np.ones((2, 2))))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        solve_tsvd(a, b, steer=(np.ones((3, 4)), np.full((3, 2), np.nan)))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        solve_tsvd(a, b, steer=(scipy.sparse.csr_array(np.full((3, 4), np.inf)), np.ones((3, 2))))

@@ -169,9 +169,11 @@ class _Rows:
 
 
 def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | None,
-                       block_bytes: int) -> np.ndarray:
+                       block_bytes: int, start: np.ndarray | None = None) -> np.ndarray:
     """``[R | C]`` (n, n + k) with ``R`` upper triangular and ``Q^T [A | B] = [R | C; 0 | D]`` for some
-    orthogonal ``Q``: the QR factor of the augmented matrix, computed block by block.
+    orthogonal ``Q``: the QR factor of the augmented matrix, computed block by block.  With ``start`` (an
+    earlier ``[R0 | C0]`` (n, n + k)), the factor of ``[R0 | C0; A | B]``: the rows of ``A`` added to a problem
+    already reduced (``start`` is updated in place and returned).
 
     Rows of ``A`` are taken in the order of their first column, ``block_rows`` at a time (default: sized from
     ``block_bytes``).  A block whose rows hold entries only in columns ``lo .. hi`` changes only the rows and
@@ -184,8 +186,13 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
     ``n`` of the QR factor (the residual) are dropped as they come: they do not enter ``R`` or ``C``.
     """
     k = b.shape[1]
-    rc = np.zeros((n, n + k))
-    reach = np.full(n, -1, np.int64)       # reach[i]: last column of a stored entry in row i of R (-1: none)
+    if start is None:
+        rc = np.zeros((n, n + k))
+        reach = np.full(n, -1, np.int64)   # reach[i]: last column of a stored entry in row i of R (-1: none)
+    else:
+        rc = start
+        nonzero = rc[:, :n] != 0
+        reach = np.where(nonzero.any(axis=1), n - 1 - np.argmax(nonzero[:, ::-1], axis=1), -1)
     keep = np.flatnonzero(~rows.empty)      # rows of zeros move only the residual
     order = keep[np.argsort(rows.first[keep], kind="stable")]
     first, last = rows.first[order], rows.last[order]
@@ -215,7 +222,7 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
 
 
 def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,
-               noisy_rows: int | None = None, block_rows: int | None = None,
+               noisy_rows: int | None = None, steer: tuple | None = None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES, full_svd_up_to: int = FULL_SVD_UP_TO) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
 
@@ -243,6 +250,13 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         the signal and leaves the noise, above all in directions the data barely determine (poles with few
         nodes), where a plain fit amplifies it.  0: no smoothing.
     noisy_rows : int or None, the rows that carry the noise (default all ``s``).
+    steer : ``(E, F)`` or None: rows ``E`` (m, n) (dense or sparse) with right-hand sides ``F`` (m, k) or
+        (m,) added to the problem, ``min ||A x - B||^2 + ||E x - F||^2``, that steer the fit (G1's rows that turn
+        a face's tangents, G2's that bend it) without moving the cut-off: it stays ``sigma_1(A) n epsilon``,
+        the data's own.  Added rows only raise every singular value (``A^T A + E^T E`` is no smaller than
+        ``A^T A``), so a direction the data determine stays kept, however heavily the steering rows weigh; as
+        part of ``A`` they would raise ``sigma_1`` and drop what the data determine (Rotor 37 at 1 M nodes:
+        turning rows raised it from 37 to 2071, and 1022 of 4752 directions fell to the prior).
     block_rows : int > 0 or None, rows of ``A`` reduced at a time; None: ``ROWS_PER_COLUMN`` times the
         columns of a typical row (first to last entry) plus k, at least ``MIN_BLOCK_ROWS``, at most what fits
         ``block_bytes``.  It changes the rounding, not the result.
@@ -263,7 +277,9 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     then the SVD of the small ``R = U_R Sigma V^T`` is taken: since Q is orthogonal, ``A = (Q U_R) Sigma V^T``
     is an SVD of A with the same singular values, at the cost of an SVD of an n x n instead of an s x n
     matrix; ``U^T B = U_R^T C``.  For a square or wide ``A`` the SVD is taken directly.  Singular values
-    ``sigma_i <= cutoff`` are dropped.  With more than ``full_svd_up_to`` unknowns, ``sigma_1`` and ``sigma_n``
+    ``sigma_i <= cutoff`` are dropped (with ``steer``, the rows ``E`` are reduced into the factor after those of
+    ``A``, the cut-off taken from ``A``'s, :func:`_sigma_max`).  With more than ``full_svd_up_to`` unknowns,
+    ``sigma_1`` and ``sigma_n``
     of ``R`` are estimated first (:func:`_extremes`); where ``sigma_n > FULL_RANK_MARGIN * cutoff`` nothing
     is dropped, and unless the noise asks for smoothing (the plain fit's residual ``||B||^2 - ||C||^2`` below
     its target) ``x = R^-1 C``, the solution the SVD would give, by back substitution.
@@ -298,8 +314,9 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     vector = b.ndim == 1
     b2 = b.reshape(s, 1) if vector else b
     k = b2.shape[1]
+    extra, f = _checked_steer(steer, n, k)
 
-    if s == 0 or n == 0:
+    if s + extra.shape[0] == 0 or n == 0:
         x = np.zeros((n, k))
         if prior is not None and n:
             x = _checked_prior(prior, A.shape, b.shape).reshape(n, k).copy()
@@ -307,11 +324,23 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
     smoothing = noise > 0 and prior is not None
     target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2   # the residual the noise leaves
-    if s > n:
+    scale = None                                  # sigma_1 of the data's A where steering rows are added
+    if s + extra.shape[0] > n:
         rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
-        rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
+        steering = _Rows(extra, n, block_bytes) if extra.shape[0] else None
+
+        def factor() -> tuple[np.ndarray, float | None]:
+            """``[R | C]`` of ``[A | B; E | F]``, and ``sigma_1`` of ``A``'s own ``R`` with steering rows."""
+            rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
+            if steering is None:
+                return rc, None
+            top = _sigma_max(rc[:, :n])
+            return _triangular_factor(steering, f, n, block_rows, block_bytes, start=rc), top or None
+
+        rc, scale = factor()
+        b2 = np.vstack([b2, f])
         if n > full_svd_up_to:
-            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, smoothing, target)
+            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, smoothing, target, scale)
             if fast is not None:
                 return replace(fast, x=fast.x[:, 0] if vector else fast.x)
         # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
@@ -321,7 +350,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         try:
             ur, sigma, vt = _svd(r, overwrite=True)
         except np.linalg.LinAlgError:                     # R once more for the slower driver
-            ur, sigma, vt = _svd(_triangular_factor(rows, b2, n, block_rows, block_bytes)[:, :n])
+            ur, sigma, vt = _svd(factor()[0][:, :n])
         utb = ur.T @ c
         del ur, r, c                                      # not held while the prior is solved
     else:
@@ -329,11 +358,15 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
         if not np.all(np.isfinite(a)):
             raise ValueError(f"A {a.shape} holds NaN or inf")
+        if extra.shape[0]:
+            scale = (float(scipy.linalg.svdvals(a, check_finite=False)[0]) if s else 0.0) or None
+            e = extra.toarray() if scipy.sparse.issparse(extra) else np.array(extra, dtype=float)
+            a, b2 = np.vstack([a, e]), np.vstack([b2, f])
         u, sigma, vt = _svd(a)
         utb = u.T @ b2
         del u, a
 
-    cutoff = float(sigma[0]) * n * float(epsilon)
+    cutoff = float(sigma[0] if scale is None else scale) * n * float(epsilon)
     keep = sigma > cutoff
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
     lam = 0.0
@@ -390,17 +423,56 @@ def _extremes(r: np.ndarray) -> tuple[float, float]:
     return float(np.sqrt(top)), float(1.0 / np.sqrt(bottom))
 
 
+def _sigma_max(r: np.ndarray) -> float:
+    """``sigma_1`` (the largest singular value) of an upper triangular ``r`` (n, n), zero rows allowed: the
+    largest eigenvalue of ``R^T R`` by Lanczos iteration (as :func:`_extremes`, to a relative
+    :data:`LANCZOS_TOL`), or all singular values up to ``_DENSE_EXTREMES`` unknowns."""
+    n = len(r)
+    if n <= _DENSE_EXTREMES:
+        return float(scipy.linalg.svdvals(r, check_finite=False)[0]) if n else 0.0
+    sparse_r = scipy.sparse.csr_array(r)
+    if not sparse_r.nnz:
+        return 0.0
+    sparse_rt = sparse_r.T.tocsr()
+    gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: sparse_rt @ (sparse_r @ v), dtype=float)
+    try:
+        top = scipy.sparse.linalg.eigsh(gram, k=1, which="LA", v0=np.random.default_rng(0).standard_normal(n),
+                                        tol=LANCZOS_TOL, return_eigenvectors=False)[0]
+    except scipy.sparse.linalg.ArpackError:
+        return float(scipy.linalg.svdvals(r, check_finite=False)[0])
+    return float(np.sqrt(max(top, 0.0)))
+
+
+def _checked_steer(steer, n: int, k: int) -> tuple:
+    """:func:`solve_tsvd`'s ``steer`` checked: ``(E, F)`` with ``E`` (m, n) (CSR if sparse) and ``F`` (m, k);
+    ``(E, F)`` of no rows for None."""
+    if steer is None:
+        return np.zeros((0, n)), np.zeros((0, k))
+    extra, f = steer
+    extra = scipy.sparse.csr_array(extra) if scipy.sparse.issparse(extra) else np.asarray(extra, dtype=float)
+    f = np.asarray(f, dtype=float)
+    f = f.reshape(len(f), 1) if f.ndim == 1 else f
+    if extra.ndim != 2 or extra.shape[1] != n or f.shape != (extra.shape[0], k):
+        raise ValueError(f"steer must be rows (m, {n}) and right-hand sides (m, {k}), got {extra.shape} and "
+                         f"{f.shape}")
+    values = extra.data if scipy.sparse.issparse(extra) else extra
+    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(f))):
+        raise ValueError(f"the steering rows {extra.shape} or their right-hand sides {f.shape} hold NaN or inf")
+    return extra, f
+
+
 def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoothing: bool,
-               target: float) -> TsvdSolution | None:
+               target: float, scale: float | None = None) -> TsvdSolution | None:
     """The solution ``R^-1 C`` (x ``(n, k)``) of the tall problem whose QR factors are ``r`` (n, n) and ``c``
     (n, k) (right-hand side ``b`` (s, k)) where nothing falls below the cut-off, with a margin, and no smoothing
     towards the prior is due (``smoothing`` asked for and the residual below ``target``); else None (the SVD
-    decides).  The diagonal bounds the singular values of a triangular matrix (``sigma_n <= min |r_ii|``,
-    ``sigma_1 >= max |r_ii|``), so a diagonal entry at or below ``max |r_ii| n epsilon`` is a dropped direction
-    without any iteration."""
+    decides).  The cut-off is ``scale n epsilon``, ``scale`` the data's ``sigma_1`` where steering rows were
+    added (:func:`solve_tsvd`), else ``r``'s own.  The diagonal bounds the singular values of a triangular
+    matrix (``sigma_n <= min |r_ii|``, ``sigma_1 >= max |r_ii|``), so a diagonal entry at or below the cut-off
+    (with ``max |r_ii|`` for ``sigma_1``) is a dropped direction without any iteration."""
     n = len(r)
     diagonal = np.abs(np.diag(r))
-    if diagonal.min() <= FULL_RANK_MARGIN * diagonal.max() * n * epsilon:
+    if diagonal.min() <= FULL_RANK_MARGIN * (diagonal.max() if scale is None else scale) * n * epsilon:
         return None
     if smoothing and _outside(b, c) < target:
         return None
@@ -409,7 +481,7 @@ def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoo
     except (scipy.sparse.linalg.ArpackError, np.linalg.LinAlgError) as exc:      # the SVD decides
         log.debug("Lanczos estimate of %d singular values failed (%s): full SVD", n, exc)
         return None
-    cutoff = sigma_max * n * float(epsilon)
+    cutoff = (sigma_max if scale is None else scale) * n * float(epsilon)
     if not sigma_min > FULL_RANK_MARGIN * cutoff:
         return None
     x = scipy.linalg.solve_triangular(r, c, check_finite=False)

@@ -194,7 +194,8 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
 
     ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
     (sparse) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
-    into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).
+    into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).  They steer the fit but leave the cut-off of
+    eq. 20 to the nodes' rows (:func:`~hot2cold.core.lstsq.solve_tsvd`'s ``steer``).
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
     domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
@@ -257,15 +258,15 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
         design = basis[:, free]
         del basis             # one design matrix held through the solve (a face's may hold millions of entries)
-        if turn is not None:
+        steer = None
+        if turn is not None:  # rows that steer the fit, not the cut-off (solve_tsvd's steer)
             from scipy import sparse
 
             extra = sparse.csr_array(turn[0])
-            rhs = np.vstack([rhs, turn[1] - extra[:, ~free] @ flat[~free]])
-            design = sparse.vstack([design, extra[:, free]], format="csr")
+            steer = (extra[:, free], turn[1] - extra[:, ~free] @ flat[~free])
         sol = solve_tsvd(design, rhs, settings.svd_epsilon,                           # eq. (19)-(20)
                          prior=lambda: _field_prior(surface, free, delta, estimator), noise=noise,
-                         noisy_rows=len(nodes))
+                         noisy_rows=len(nodes), steer=steer)
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
     return FaceMorph(face.index, surface.with_poles(surface.poles + delta), len(nodes), edge_rows,
