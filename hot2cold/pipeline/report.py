@@ -242,7 +242,10 @@ class Report:
                 continue
             degree = (f", degree {r['degree_before']} -> {r['degree_after']}"
                       if r.get("degree_before", "") != r.get("degree_after", "") else "")
-            stop = "" if not self._misses(r) else (f"; where it still misses, {short}" if not r.get("refinable", True)
+            unresolved = r.get("unresolved", 0)
+            left = (f"at {unresolved} of its nodes a finer net did not bring it closer (the field's nodes around "
+                    f"them do not follow them)" if unresolved else short)
+            stop = "" if not self._misses(r) else (f"; where it still misses, {left}" if not r.get("refinable", True)
                                                    else "; it still misses after the most rounds allowed "
                                                         "(--max-refinements)")
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
