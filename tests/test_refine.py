@@ -649,26 +649,3 @@ def test_a_node_the_field_around_it_does_not_follow_is_not_chased(blade_1mm):
         if r["face"] != 0 and r["face"] in others:
             assert r["net_after"] == others[r["face"]]["net_after"]
 
-
-@pytest.mark.parametrize("limit", [0.0, 1e-3, 5e-3, 1.0])
-def test_node_distances_are_exact_above_the_limit_and_at_the_largest(limit):
-    """The refinement's errors at the nodes: the Gauss-Newton distance wherever it can exceed the limit or be
-    the largest, the distance at the node's own parameters (a bound) elsewhere."""
-    from hot2cold.pipeline.refine import node_distances
-
-    surface = _surface(False)
-    rng = np.random.default_rng(5)
-    uv = rng.uniform(0.0, 1.0, (5000, 2)) * [surface.domain[1], surface.domain[3]]
-    normal_ish = rng.normal(size=(len(uv), 3))
-    points = evaluate_surface(surface, uv[:, 0], uv[:, 1]) + rng.exponential(2e-3, (len(uv), 1)) * normal_ish
-    box = surface.domain
-    exact = surface_distances(surface, points, uv, box, past_border=True)
-    found = node_distances(surface, points, uv, box, limit)
-    assert found.max() == exact.max()
-    above = exact > limit
-    np.testing.assert_array_equal(found[above], exact[above])
-    assert np.all(found >= exact) and not np.any(found[~above] > limit)
-    if limit == 0.0:
-        np.testing.assert_array_equal(found, exact)
-    elif limit < exact.max():                  # the points within the limit keep their bounds, unprojected
-        assert np.count_nonzero(found != exact) > 1000           # measured: 1570 of 5000 at 1e-3 mm

@@ -238,3 +238,33 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
         if not len(active):
             break
     return (best, uv) if return_uv else best
+
+
+def surface_distances_above(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, box, limit: float = np.inf,
+                            return_uv: bool = False):
+    """:func:`surface_distances` ``(m,)`` (past the border) of ``points (m, 3)`` from the parameters ``uv (m, 2)``
+    where they can exceed ``limit`` or be the largest; elsewhere the distance from the surface at ``uv`` itself
+    (clipped to ``box`` and the domain), which bounds the distance from above (Gauss-Newton starts there).  So
+    every value above ``limit`` and the largest are the distances themselves, and no other exceeds ``limit``;
+    the default ``limit`` asks for the largest alone.  One evaluation per point instead of a projection for
+    most: a fit passes most of its points within a fraction of the largest distance.  With ``return_uv``, also
+    the parameters ``(m, 2)`` where each was found (``uv`` clipped, where not projected)."""
+    points = np.asarray(points, float)
+    u0, u1, v0, v1 = surface.domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    if box is not None:
+        lo, hi = np.maximum(lo, [box[0], box[2]]), np.minimum(hi, [box[1], box[3]])
+    found = np.clip(np.array(uv, float).reshape(-1, 2), lo, hi)
+    out = np.linalg.norm(points - evaluate_surface(surface, found[:, 0], found[:, 1]), axis=1) if len(points) \
+        else np.zeros(0)
+    order = np.argsort(out)[::-1]
+    done, largest = 0, 0.0
+    while done < len(order) and (out[order[done]] > limit or out[order[done]] > largest):
+        step = max(1024, done)                               # the largest bounds first, in growing chunks
+        take = order[done:done + step]
+        take = take[(out[take] > limit) | (out[take] > largest)]
+        out[take], found[take] = surface_distances(surface, points[take], found[take], box, past_border=True,
+                                                   return_uv=True)
+        largest = max(largest, float(out[take].max()))
+        done += step
+    return (out, found) if return_uv else out

@@ -54,7 +54,7 @@ import numpy as np
 
 from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
                             polyline_length, refine_curve, refine_surface)
-from ..core.footpoint import curve_distances, surface_distances
+from ..core.footpoint import curve_distances, surface_distances, surface_distances_above
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
 from ..io.field import DisplacementField
 from .checks import EdgeGrid, FaceGrid
@@ -268,37 +268,14 @@ def noise_allowance(scatter: float, nodes: int) -> float:
 class FaceErrors(NamedTuple):
     """A face's errors (mm) and where they are: at its nodes (eq. 21), and between them (its grid points near
     nodes, and its edges' cold points).  ``uv`` and ``error`` hold all of them, for the marks (at a node within
-    the limit, an upper bound of its error, :func:`node_distances`); ``nodes`` and ``between`` the largest of
+    the limit, an upper bound of its error,
+    :func:`~hot2cold.core.footpoint.surface_distances_above`); ``nodes`` and ``between`` the largest of
     each kind (0 where there are none)."""
 
     uv: np.ndarray
     error: np.ndarray
     nodes: float
     between: float
-
-
-def node_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarray, box, limit: float) -> np.ndarray:
-    """:func:`~hot2cold.core.footpoint.surface_distances` ``(m,)`` (mm, past the border) of ``points (m, 3)`` from
-    the parameters ``uv (m, 2)`` where they can exceed ``limit`` or be the largest; elsewhere the distance from
-    the surface at ``uv`` itself, which bounds it from above (the Gauss-Newton starts there).  So every value
-    above ``limit`` and the largest are the distances themselves, and no other exceeds ``limit``: one
-    evaluation per point instead of a projection for most (a refined face's fit passes most of its nodes
-    within a fraction of the tolerance)."""
-    if not len(points):
-        return np.zeros(0)
-    u0, u1, v0, v1 = surface.domain
-    lo, hi = np.array([max(u0, box[0]), max(v0, box[2])]), np.array([min(u1, box[1]), min(v1, box[3])])
-    start = np.clip(uv, lo, hi)
-    out = np.linalg.norm(points - evaluate_surface(surface, start[:, 0], start[:, 1]), axis=1)
-    order = np.argsort(out)[::-1]
-    done, largest = 0, 0.0
-    while done < len(order) and (out[order[done]] > limit or out[order[done]] > largest):
-        take = order[done:done + max(1024, done)]          # the largest bounds first, in growing chunks
-        take = take[(out[take] > limit) | (out[take] > largest)]
-        out[take] = surface_distances(surface, points[take], uv[take], box, past_border=True)
-        largest = max(largest, float(out[take].max()))
-        done += max(1024, done)
-    return out
 
 
 def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField, grid: FaceGrid,
@@ -309,7 +286,7 @@ def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: Displ
     triangulation nodes sat 1.12 mm from its hot edge, and six rounds of refinement could not close it)."""
     nodes = cls.nodes_of(Role.FACE, face.index)
     target = cls.foot[nodes] + field.displacements[nodes]
-    at_nodes = node_distances(morph.surface, target, cls.uv[nodes], face.uv_box, limit)
+    at_nodes = surface_distances_above(morph.surface, target, cls.uv[nodes], face.uv_box, limit)
     off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
     uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
     for use in face.uses:
