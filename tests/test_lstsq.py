@@ -6,7 +6,7 @@ import pytest
 import scipy.sparse
 
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, curve_basis, surface_basis
-from hot2cold.core.lstsq import TsvdSolution, solve_tsvd
+from hot2cold.core.lstsq import TsvdSolution, reduce_rows, solve_tsvd
 from hot2cold.settings import FLT_EPSILON
 
 
@@ -562,3 +562,42 @@ def test_steering_rows_are_checked():
         solve_tsvd(a, b, steer=(np.ones((3, 4)), np.full((3, 2), np.nan)))
     with pytest.raises(ValueError, match="NaN or inf"):
         solve_tsvd(a, b, steer=(scipy.sparse.csr_array(np.full((3, 4), np.inf)), np.ones((3, 2))))
+
+
+@pytest.mark.parametrize("fmt", ["dense", "csr"])
+@pytest.mark.parametrize("k", [None, 3])
+@pytest.mark.parametrize("full_svd_up_to", [0, 1000])
+def test_reduced_rows_solve_as_the_rows_themselves(fmt, k, full_svd_up_to):
+    """Rows reduced once (G1 turns a face again and again with other steering rows) give the solution of the
+    rows themselves with each set of steering rows, the smoothing towards a prior included."""
+    rng = np.random.default_rng(33)
+    a = rng.normal(size=(300, 24))
+    a[rng.random(a.shape) < 0.6] = 0.0
+    a += np.eye(300, 24)
+    a[:, -2:] *= 1e-3
+    b = rng.normal(size=300 if k is None else (300, k))
+    reduced = reduce_rows(_as_format(a, fmt), b)
+    prior = rng.normal(size=(24,) if k is None else (24, k))
+    for m in (0, 3, 8):
+        e = rng.normal(size=(m, 24)) * 50.0
+        f = rng.normal(size=m if k is None else (m, k))
+        for noise in (0.0, 0.5):
+            steer = (_as_format(e, fmt), f)
+            direct = solve_tsvd(_as_format(a, fmt), b, prior=prior, noise=noise, steer=steer,
+                                full_svd_up_to=full_svd_up_to)
+            again = solve_tsvd(reduced, None, prior=prior, noise=noise, steer=steer, full_svd_up_to=full_svd_up_to)
+            assert again.x.shape == direct.x.shape and again.rank == direct.rank
+            assert again.cutoff == pytest.approx(direct.cutoff, rel=1e-12)
+            assert again.smoothing == pytest.approx(direct.smoothing, rel=1e-9)
+            np.testing.assert_allclose(again.x, direct.x, rtol=0, atol=1e-10 * np.abs(direct.x).max())
+    assert reduced.factor.shape == (24, 24 + (1 if k is None else k))      # never changed by the solves
+    np.testing.assert_array_equal(reduced.factor, reduce_rows(_as_format(a, fmt), b).factor)
+
+
+def test_reduced_rows_are_checked():
+    with pytest.raises(ValueError, match="tall problems"):
+        reduce_rows(np.ones((4, 6)), np.ones(4))
+    with pytest.raises(ValueError, match="B needs 8 rows"):
+        reduce_rows(np.ones((8, 3)), np.ones(7))
+    with pytest.raises(ValueError, match="pass None"):
+        solve_tsvd(reduce_rows(np.eye(8, 3), np.ones(8)), np.ones(8))

@@ -221,6 +221,59 @@ def _triangular_factor(rows: _Rows, b: np.ndarray, n: int, block_rows: int | Non
     return rc
 
 
+@dataclass(frozen=True, eq=False)
+class ReducedRows:
+    """The rows of a tall problem ``A x = B`` reduced once (:func:`reduce_rows`), to be solved by
+    :func:`solve_tsvd` with other steering rows each time (G1's turning rows, G2's bending rows) without
+    reading ``A`` again.
+
+    Attributes
+    ----------
+    factor : (n, n + k) float array, ``[R | C]``, the QR factor of ``[A | B]`` (:func:`_triangular_factor`).
+    shape : ``(s, n)``, the shape of ``A``.
+    square_sum : float, ``||B||^2``.
+    vector : bool, ``B`` was ``(s,)`` (the solution is then ``(n,)``).
+    """
+
+    factor: np.ndarray
+    shape: tuple[int, int]
+    square_sum: float
+    vector: bool
+
+
+def _checked_problem(A, B) -> tuple:
+    """``A`` (2-D, dense as an array or sparse) and ``B`` (a float array) of :func:`solve_tsvd`, checked."""
+    if scipy.sparse.issparse(A):
+        if A.ndim != 2:
+            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
+    else:
+        A = np.asarray(A)
+        if A.ndim != 2:
+            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
+    b = np.asarray(B, dtype=float)
+    if b.ndim not in (1, 2):
+        raise ValueError(f"B must be (s,) or (s, k), got shape {b.shape}")
+    if b.shape[0] != A.shape[0]:
+        raise ValueError(f"A is {A.shape} but B is {b.shape}: B needs {A.shape[0]} rows, one per row of A")
+    if not np.all(np.isfinite(b)):
+        raise ValueError(f"B {b.shape} holds NaN or inf")
+    return A, b
+
+
+def reduce_rows(A, B, block_rows: int | None = None, block_bytes: int = BLOCK_BYTES) -> ReducedRows:
+    """The tall problem ``A x = B`` (``A`` (s, n) with ``s > n``, dense or sparse; ``B`` (s, k) or (s,)) reduced
+    to its QR factor, as :func:`solve_tsvd` reduces it (block by block, ``O(n^2)`` memory), for
+    :func:`solve_tsvd` to solve as often as asked, each time with other ``steer`` rows: the same solution as
+    ``solve_tsvd(A, B, steer=...)`` (to rounding) at the cost of the steering rows alone."""
+    A, b = _checked_problem(A, B)
+    s, n = A.shape
+    if s <= n:
+        raise ValueError(f"reduce_rows takes tall problems (more rows than unknowns), got A {A.shape}")
+    b2 = b.reshape(s, -1)
+    factor = _triangular_factor(_Rows(A, n, block_bytes), b2, n, block_rows, block_bytes)
+    return ReducedRows(factor, (s, n), float(np.sum(b2 * b2)), b.ndim == 1)
+
+
 def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,
                noisy_rows: int | None = None, steer: tuple | None = None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES, full_svd_up_to: int = FULL_SVD_UP_TO) -> TsvdSolution:
@@ -228,11 +281,13 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
 
     Parameters
     ----------
-    A : (s, n) dense array or ``scipy.sparse`` matrix/array, the design matrix (s observations, n unknowns).
+    A : (s, n) dense array or ``scipy.sparse`` matrix/array, the design matrix (s observations, n unknowns);
+        or a :class:`ReducedRows` of a tall problem (:func:`reduce_rows`), with ``B`` None.
         A tall ``A`` is read a block of rows at a time (a sparse one densified block by block), so ``s`` may
         be in the millions: memory is ``O(n^2)`` plus one block and a few integers per row (no copy of a CSR
         ``A``; other sparse formats are converted to CSR once).
-    B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation.
+    B : (s, k) or (s,) array, right-hand side(s); the k columns (e.g. x, y, z) share one factorisation; None
+        with :class:`ReducedRows`.
     epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * n * epsilon``; default the
         paper's FLT_EPSILON (single precision, about 1.2e-7).
     prior : (n, k) or (n,) array, or a callable returning one, or None: a guess of ``x`` that the dropped
@@ -287,60 +342,65 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     Edge cases: ``n == 0`` gives an empty ``x`` (0, k); ``s == 0`` (no observations) gives ``x = 0`` with
     ``rank == 0``.  An all-zero ``A`` gives ``x = 0``, ``rank == 0``.
     """
-    if scipy.sparse.issparse(A):
-        if A.ndim != 2:
-            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
-    else:
-        A = np.asarray(A)
-        if A.ndim != 2:
-            raise ValueError(f"A must be a 2-D (s, n) matrix, got shape {A.shape}")
-    b = np.asarray(B, dtype=float)
-    if b.ndim not in (1, 2):
-        raise ValueError(f"B must be (s,) or (s, k), got shape {b.shape}")
-    s, n = A.shape
-    if b.shape[0] != s:
-        raise ValueError(f"A is {A.shape} but B is {b.shape}: B needs {s} rows, one per row of A")
     if not (np.isfinite(epsilon) and epsilon > 0):
         raise ValueError(f"epsilon must be positive and finite, got {epsilon!r}")
     if block_rows is not None and block_rows < 1:
         raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
     if full_svd_up_to < 0:
         raise ValueError(f"full_svd_up_to must be a number of unknowns >= 0, got {full_svd_up_to!r}")
-    if not np.all(np.isfinite(b)):
-        raise ValueError(f"B {b.shape} holds NaN or inf")
+    reduced = A if isinstance(A, ReducedRows) else None
+    if reduced is not None:
+        if B is not None:
+            raise ValueError("B comes with the reduced rows: pass None")
+        (s, n), k = reduced.shape, reduced.factor.shape[1] - reduced.shape[1]
+        b_shape = (s,) if reduced.vector else (s, k)
+    else:
+        A, b = _checked_problem(A, B)
+        (s, n), b_shape = A.shape, b.shape
     if prior is not None and not callable(prior):
-        _checked_prior(prior, A.shape, b.shape)
+        _checked_prior(prior, (s, n), b_shape)
 
-    vector = b.ndim == 1
-    b2 = b.reshape(s, 1) if vector else b
-    k = b2.shape[1]
+    vector = len(b_shape) == 1
+    k = 1 if vector else b_shape[1]
+    b2 = None if reduced is not None else b.reshape(s, k)
     extra, f = _checked_steer(steer, n, k)
 
     if s + extra.shape[0] == 0 or n == 0:
         x = np.zeros((n, k))
         if prior is not None and n:
-            x = _checked_prior(prior, A.shape, b.shape).reshape(n, k).copy()
+            x = _checked_prior(prior, (s, n), b_shape).reshape(n, k).copy()
         return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
                             sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
     smoothing = noise > 0 and prior is not None
     target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2   # the residual the noise leaves
     scale = None                                  # sigma_1 of the data's A where steering rows are added
-    if s + extra.shape[0] > n:
-        rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
+    if reduced is not None or s + extra.shape[0] > n:
+        if reduced is None:
+            rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
+
+            def data() -> np.ndarray:
+                return _triangular_factor(rows, b2, n, block_rows, block_bytes)
+
+            total = float(np.sum(b2 * b2))
+        else:
+            def data() -> np.ndarray:
+                return reduced.factor.copy()
+
+            total = reduced.square_sum
         steering = _Rows(extra, n, block_bytes) if extra.shape[0] else None
 
         def factor() -> tuple[np.ndarray, float | None]:
             """``[R | C]`` of ``[A | B; E | F]``, and ``sigma_1`` of ``A``'s own ``R`` with steering rows."""
-            rc = _triangular_factor(rows, b2, n, block_rows, block_bytes)
+            rc = data()
             if steering is None:
                 return rc, None
             top = _sigma_max(rc[:, :n])
             return _triangular_factor(steering, f, n, block_rows, block_bytes, start=rc), top or None
 
         rc, scale = factor()
-        b2 = np.vstack([b2, f])
+        total += float(np.sum(f * f))
         if n > full_svd_up_to:
-            fast = _full_rank(rc[:, :n], rc[:, n:], b2, epsilon, smoothing, target, scale)
+            fast = _full_rank(rc[:, :n], rc[:, n:], total, epsilon, smoothing, target, scale)
             if fast is not None:
                 return replace(fast, x=fast.x[:, 0] if vector else fast.x)
         # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
@@ -362,6 +422,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
             scale = (float(scipy.linalg.svdvals(a, check_finite=False)[0]) if s else 0.0) or None
             e = extra.toarray() if scipy.sparse.issparse(extra) else np.array(extra, dtype=float)
             a, b2 = np.vstack([a, e]), np.vstack([b2, f])
+        total = float(np.sum(b2 * b2))
         u, sigma, vt = _svd(a)
         utb = u.T @ b2
         del u, a
@@ -371,13 +432,13 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
     lam = 0.0
     if smoothing and rank:
-        lam, x = _smoothed(sigma, rank, vt, utb, b2, target, lambda: _checked_prior(prior, A.shape, b.shape))
+        lam, x = _smoothed(sigma, rank, vt, utb, total, target, lambda: _checked_prior(prior, (s, n), b_shape))
     else:
         x = None
     if x is None:
         x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
         if prior is not None and rank < n:
-            x0 = _checked_prior(prior, A.shape, b.shape).reshape(n, k)
+            x0 = _checked_prior(prior, (s, n), b_shape).reshape(n, k)
             x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
     condition = float(sigma[0] / sigma[rank - 1]) if rank else float("nan")
     return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
@@ -461,20 +522,20 @@ def _checked_steer(steer, n: int, k: int) -> tuple:
     return extra, f
 
 
-def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoothing: bool,
+def _full_rank(r: np.ndarray, c: np.ndarray, total: float, epsilon: float, smoothing: bool,
                target: float, scale: float | None = None) -> TsvdSolution | None:
     """The solution ``R^-1 C`` (x ``(n, k)``) of the tall problem whose QR factors are ``r`` (n, n) and ``c``
-    (n, k) (right-hand side ``b`` (s, k)) where nothing falls below the cut-off, with a margin, and no smoothing
-    towards the prior is due (``smoothing`` asked for and the residual below ``target``); else None (the SVD
-    decides).  The cut-off is ``scale n epsilon``, ``scale`` the data's ``sigma_1`` where steering rows were
-    added (:func:`solve_tsvd`), else ``r``'s own.  The diagonal bounds the singular values of a triangular
-    matrix (``sigma_n <= min |r_ii|``, ``sigma_1 >= max |r_ii|``), so a diagonal entry at or below the cut-off
-    (with ``max |r_ii|`` for ``sigma_1``) is a dropped direction without any iteration."""
+    (n, k) (the right-hand side's square sum ``total``) where nothing falls below the cut-off, with a margin,
+    and no smoothing towards the prior is due (``smoothing`` asked for and the residual below ``target``);
+    else None (the SVD decides).  The cut-off is ``scale n epsilon``, ``scale`` the data's ``sigma_1`` where
+    steering rows were added (:func:`solve_tsvd`), else ``r``'s own.  The diagonal bounds the singular values
+    of a triangular matrix (``sigma_n <= min |r_ii|``, ``sigma_1 >= max |r_ii|``), so a diagonal entry at or
+    below the cut-off (with ``max |r_ii|`` for ``sigma_1``) is a dropped direction without any iteration."""
     n = len(r)
     diagonal = np.abs(np.diag(r))
     if diagonal.min() <= FULL_RANK_MARGIN * (diagonal.max() if scale is None else scale) * n * epsilon:
         return None
-    if smoothing and _outside(b, c) < target:
+    if smoothing and _outside(total, c) < target:
         return None
     try:
         sigma_max, sigma_min = _extremes(r)
@@ -490,25 +551,27 @@ def _full_rank(r: np.ndarray, c: np.ndarray, b: np.ndarray, epsilon: float, smoo
                         sigma_min=sigma_min, cutoff=cutoff, singular_values=None)
 
 
-def _outside(b: np.ndarray, projected: np.ndarray) -> float:
-    """``||B||^2 - ||P||^2`` (at least 0) for the right-hand side ``b`` (s, k) and its coordinates ``projected``
-    in orthonormal columns whose span holds the range of ``A`` (``Q^T B``'s first n rows, or ``U^T B``): the
-    part of the residual outside them, which no ``x`` removes (all of it for a full-rank fit)."""
-    return max(float(np.sum(b * b) - np.sum(projected * projected)), 0.0)
+def _outside(total: float, projected: np.ndarray) -> float:
+    """``||B||^2 - ||P||^2`` (at least 0) for the right-hand side's square sum ``total`` (``||B||^2``) and its
+    coordinates ``projected`` in orthonormal columns whose span holds the range of ``A`` (``Q^T B``'s first n
+    rows, or ``U^T B``): the part of the residual outside them, which no ``x`` removes (all of it for a
+    full-rank fit)."""
+    return max(total - float(np.sum(projected * projected)), 0.0)
 
 
-def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, b: np.ndarray, target: float,
+def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, total: float, target: float,
               prior) -> tuple[float, np.ndarray | None]:
     """The Tikhonov solution towards ``prior() (n, k)`` whose residual is ``target``, and its ``lambda``:
     ``(0, None)`` where the plain truncated fit leaves ``target`` or more already.
 
     ``sigma (m,)`` are the singular values (the first ``rank`` kept), ``vt (m, n)`` and ``utb (m, k)`` the
-    SVD's right vectors and ``U^T B``, ``b (s, k)`` the right-hand side.  With ``c = U^T (B - A x0)``
-    (``c_i = (U^T B)_i - sigma_i (V^T x0)_i``), ``x = x0 + sum_i f_i c_i / sigma_i v_i`` over the kept
-    directions (the prior in the dropped ones) leaves ``||B||^2 - ||U^T B||^2`` (outside the range of ``A``),
-    the dropped ``c_i``, and ``(1 - f_i)^2 c_i^2`` with ``1 - f_i = lambda^2 / (sigma_i^2 + lambda^2)``:
-    increasing in ``lambda``, solved for by bisection on its logarithm."""
-    outside = _outside(b, utb)
+    SVD's right vectors and ``U^T B``, ``total`` the right-hand side's square sum ``||B||^2``.  With
+    ``c = U^T (B - A x0)`` (``c_i = (U^T B)_i - sigma_i (V^T x0)_i``), ``x = x0 + sum_i f_i c_i / sigma_i v_i``
+    over the kept directions (the prior in the dropped ones) leaves ``||B||^2 - ||U^T B||^2`` (outside the
+    range of ``A``), the dropped ``c_i``, and ``(1 - f_i)^2 c_i^2`` with
+    ``1 - f_i = lambda^2 / (sigma_i^2 + lambda^2)``: increasing in ``lambda``, solved for by bisection on its
+    logarithm."""
+    outside = _outside(total, utb)
     if outside + float(np.sum(utb[rank:] ** 2)) >= target:
         return 0.0, None
     x0 = prior().reshape(vt.shape[1], -1)

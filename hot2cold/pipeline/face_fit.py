@@ -31,7 +31,7 @@ from ..core.bspline import (BSplineSurface, evaluate_curve, evaluate_surface, kn
                             surface_basis)
 from .edge_fit import EdgeMorph
 from ..io.field import DisplacementField
-from ..core.lstsq import solve_tsvd
+from ..core.lstsq import ReducedRows, reduce_rows, solve_tsvd
 from ..core.model import Classification, EdgeUse, Face, Part, Role, Side, side_along
 from ..settings import Settings
 
@@ -186,22 +186,44 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
                       prior=estimator(surface.poles.reshape(-1, 3)[free])).x
 
 
-def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
-               edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-               noise: float = 0.0, turn: tuple | None = None) -> FaceMorph:
-    """Morph one face with its boundary taken from the morphed edges.
+@dataclass(frozen=True, eq=False)
+class FaceProblem:
+    """One face's fit (eq. 38) before its solve, to be solved once or, with other steering rows each time (G1's
+    turning rows, G2's bending rows), again and again (:func:`solve_face`).
 
-    ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
-    (sparse) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
-    into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).  They steer the fit but leave the cut-off of
-    eq. 20 to the nodes' rows (:func:`~hot2cold.core.lstsq.solve_tsvd`'s ``steer``).
-
-    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
-    domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
-    is smoothed towards the field's estimate until it leaves that much at the face's nodes
-    (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    Attributes
+    ----------
+    face : int.
+    surface : BSplineSurface, the hot surface.
+    delta : (nu, nv, 3) float array, the tied rows' displacements (zero elsewhere).
+    free : (nu * nv,) bool array, the poles solved for.
+    rows : the design and right-hand side ``(A (s, n_free), B (s, 3))``, or their
+        :class:`~hot2cold.core.lstsq.ReducedRows` where there are more rows than free poles.
+    noisy_rows : int, the rows that carry the field's noise (the face's nodes).
+    prior : callable, the field's estimate at the free poles ``(n_free, 3)`` (:func:`_field_prior`).
+    nodes, edge_rows, artificial, tied : as :class:`FaceMorph`.
     """
+
+    face: int
+    surface: BSplineSurface
+    delta: np.ndarray
+    free: np.ndarray
+    rows: object
+    noisy_rows: int
+    prior: Callable[[], np.ndarray]
+    nodes: int
+    edge_rows: int
+    artificial: int
+    tied: tuple[Side, ...]
+
+
+def face_problem(face: Face, part: Part, cls: Classification, field: DisplacementField,
+                 edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
+                 settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
+                 reduce: bool = False) -> FaceProblem:
+    """One face's fit with its boundary taken from the morphed edges (see :func:`morph_face`), before its solve;
+    ``reduce``: the rows reduced to their QR factor once (:func:`~hot2cold.core.lstsq.reduce_rows`), for a face
+    that will be solved again with steering rows."""
     surface = face.surface
     nu, nv = surface.shape
     tol = 1e-7 * part.diagonal
@@ -250,7 +272,7 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         weight = np.concatenate([weight, np.full(len(centres), settings.artificial_weight)])
 
     free = ~fixed.ravel()
-    rank, condition = 0, float("nan")
+    rows = None
     if free.any():
         basis = surface_basis(surface, uv[:, 0], uv[:, 1])
         basis.data *= np.repeat(weight, np.diff(basis.indptr))                      # rows weighted in place
@@ -258,19 +280,53 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
         rhs = weight[:, None] * target - basis[:, ~free] @ flat[~free]               # eq. (38)
         design = basis[:, free]
         del basis             # one design matrix held through the solve (a face's may hold millions of entries)
+        rows = reduce_rows(design, rhs) if reduce and design.shape[0] > design.shape[1] else (design, rhs)
+    return FaceProblem(face.index, surface, delta, free, rows, len(nodes),
+                       lambda: _field_prior(surface, free, delta, estimator), len(nodes), edge_rows, len(centres),
+                       tuple(sorted(set(tied))))
+
+
+def solve_face(problem: FaceProblem, settings: Settings, noise: float = 0.0, turn: tuple | None = None
+               ) -> FaceMorph:
+    """The face morph of ``problem`` (eq. 19-20), with ``turn`` rows as :func:`morph_face`'s."""
+    surface, free = problem.surface, problem.free
+    delta = problem.delta.copy()
+    rank, condition = 0, float("nan")
+    if free.any():
+        flat = delta.reshape(-1, 3)
         steer = None
         if turn is not None:  # rows that steer the fit, not the cut-off (solve_tsvd's steer)
             from scipy import sparse
 
             extra = sparse.csr_array(turn[0])
             steer = (extra[:, free], turn[1] - extra[:, ~free] @ flat[~free])
-        sol = solve_tsvd(design, rhs, settings.svd_epsilon,                           # eq. (19)-(20)
-                         prior=lambda: _field_prior(surface, free, delta, estimator), noise=noise,
-                         noisy_rows=len(nodes), steer=steer)
+        a, b = (problem.rows, None) if isinstance(problem.rows, ReducedRows) else problem.rows
+        sol = solve_tsvd(a, b, settings.svd_epsilon, prior=problem.prior, noise=noise,       # eq. (19)-(20)
+                         noisy_rows=problem.noisy_rows, steer=steer)
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
-    return FaceMorph(face.index, surface.with_poles(surface.poles + delta), len(nodes), edge_rows,
-                     len(centres), tuple(sorted(set(tied))), int(free.sum()), rank, condition)
+    return FaceMorph(problem.face, surface.with_poles(surface.poles + delta), problem.nodes, problem.edge_rows,
+                     problem.artificial, problem.tied, int(free.sum()), rank, condition)
+
+
+def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
+               edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
+               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
+               noise: float = 0.0, turn: tuple | None = None) -> FaceMorph:
+    """Morph one face with its boundary taken from the morphed edges (:func:`face_problem`, :func:`solve_face`).
+
+    ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
+    (sparse) and ``targets (m, 3)``, weighted as given: the tangents along a trimming curve turned
+    into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).  They steer the fit but leave the cut-off of
+    eq. 20 to the nodes' rows (:func:`~hot2cold.core.lstsq.solve_tsvd`'s ``steer``).
+
+    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
+    domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
+    is smoothed towards the field's estimate until it leaves that much at the face's nodes
+    (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    """
+    return solve_face(face_problem(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
+                                   trimmed_away), settings, noise, turn)
 
 
 def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_morphs: list[EdgeMorph],

@@ -33,7 +33,7 @@ from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage
                      edge_grids, face_grids)
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
-from .face_fit import FaceMorph, morph_face, morph_faces
+from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners,
                  correct_g1, edge_decided, kink_added, kink_bound, kink_misses, surface_corner_normals,
@@ -197,6 +197,9 @@ class MorphContext:
     #: The parameters where :meth:`field_distance` found the distances of a fit G1 or G2 may replace (by the
     #: same keys), for :meth:`_distance_bound`; only for those, since each holds a pair per node.
     _feet: dict = dataclass_field(default_factory=dict, init=False, repr=False)
+    #: The last fit of each face on a tangent edge, its rows reduced (face -> (what it was fitted on, its
+    #: FaceProblem)): G1 and G2 fit such a face again and again with other turning and bending rows only.
+    _problems: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
     def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
@@ -237,9 +240,23 @@ class MorphContext:
                  ) -> FaceMorph:
         """One face of ``part`` (this context's part, or a refined one) morphed against ``edge_morphs``
         (eq. 23-38); :func:`~hot2cold.pipeline.refine.refine`'s ``fit_face``; ``turn``: rows that turn it
-        along trimming curves (:func:`~hot2cold.pipeline.g1.turn_rows`)."""
-        return morph_face(face, part, self.classification, self.field, edge_morphs, self.vertex_displacements,
-                          self.estimator, self.settings, self.trimmed_away, self.noise, turn)
+        along trimming curves (:func:`~hot2cold.pipeline.g1.turn_rows`).  A face on a tangent edge keeps its
+        rows reduced (:func:`~hot2cold.pipeline.face_fit.face_problem`) while it, its edges and their morphs
+        stay the same objects: G1 and G2 fit it again with other turning or bending rows only, at the cost of
+        those rows."""
+        if not any(face.index in te.faces for te in self.tangent):
+            return morph_face(face, part, self.classification, self.field, edge_morphs, self.vertex_displacements,
+                              self.estimator, self.settings, self.trimmed_away, self.noise, turn)
+        # what the fit reads besides the context: the face, its edges and their morphs (objects, compared by
+        # identity: a refined part or a moved edge is a new object)
+        basis = (face, *(part.edges[u.edge] for u in face.uses), *(edge_morphs[u.edge] for u in face.uses))
+        kept = self._problems.get(face.index)
+        if kept is None or len(kept[0]) != len(basis) or any(a is not b for a, b in zip(kept[0], basis)):
+            kept = basis, face_problem(face, part, self.classification, self.field, edge_morphs,
+                                       self.vertex_displacements, self.estimator, self.settings, self.trimmed_away,
+                                       reduce=True)
+            self._problems[face.index] = kept
+        return solve_face(kept[1], self.settings, self.noise, turn)
 
     def refit_edges(self, part: Part, edge_morphs: list[EdgeMorph], refined: set[int]) -> list[EdgeMorph]:
         """The edges in ``refined`` of the refined ``part`` morphed again (eq. 10-20) and the corners of
