@@ -89,8 +89,8 @@ MIN_SPAN_SPACINGS_ELEMENTS = 0.25
 #: above this share of what it was (a knot span halved for a smooth field's miss cuts it by half at least,
 #: by far more for a smooth field: the error of a cubic falls as the fourth power of the span).  Rotor 37's
 #: CalculiX field resampled onto 1 M nodes has nodes 2e-3 mm off the quadratic through the 80 around them
-#: within 0.4 mm, which that quadratic meets within 5e-5 mm (the resampling's slips at the blade's tip); six
-#: rounds of halving took the worst of them from 2.5e-3 to 2.0e-3 mm, and its faces to 2 664 and 4 752 poles.
+#: within 0.4 mm, which that quadratic meets within 5e-5 mm (slips of the resampling); six
+#: rounds of halving took the worst of them from 2.5e-3 to 2.0e-3 mm, and its faces to 2 664 and 1 512 poles.
 STALL_SHARE = 0.9
 
 
