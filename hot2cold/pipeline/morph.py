@@ -823,28 +823,35 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     elements = (ElementField(fe_field.points, fe_field.triangles, fe_field.displacements, cls.node_distance,
                              scale.strain) if element_points_added else None)
     face_nodes = FaceNodes(cls, field, settings.vertex_neighbours)      # kept for every round's grids
-    grids = face_grids(context.part, projector, cls, field, context.estimator, settings.vertex_neighbours,
-                       elements=elements, face_nodes=face_nodes)
     estimator = context.estimator
 
     def regrid(part: Part, faces: list[int]) -> list[FaceGrid]:
-        """The grids of ``faces`` of a refined ``part`` (the refinement's and G1's)."""
+        """The grids of ``faces`` of ``part`` (the hot one or a refined one: the refinement's and G1's)."""
         return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements,
                           face_nodes)
 
     refinements, edge_refinements = (), ()
     refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
-    if settings.tolerance is not None and not settings.keep_knots:
+    made: dict[int, FaceGrid] = {}      # grids of the faces the refinement measures on them, then of every face
+    refining = settings.tolerance is not None and not settings.keep_knots
+    if refining:
         stages.begin("refine")
-        targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, grids,
+        measured = Targets.measured_faces(context.part, cls)
+        made.update(zip(measured, regrid(context.part, measured)))
+        targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, made,
                              edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
         refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
                          context.fit_face, context.refit_edges, regrid)
         context = replace(context, part=refined.part)
-        grids = [refined.grids.get(k, grid) for k, grid in enumerate(grids)]
+        made.update(refined.grids)
         face_morphs, edge_morphs = refined.faces, refined.edges
         refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
         refined_spans = targets.min_span_spacings
+    # the other faces' grids once, on their final knots (a face refined without them never needed one before)
+    missing = [k for k in range(len(context.part.faces)) if k not in made]
+    made.update(zip(missing, regrid(context.part, missing) if missing else []))
+    grids = [made[k] for k in range(len(context.part.faces))]
+    if refining:
         stages.lap("refine")
 
     # G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges; faces

@@ -149,7 +149,9 @@ class EdgeRefinement:
 @dataclass(eq=False)
 class RefineResult:
     """The refined part (hot geometry, refined faces and edges), the new morphs, what was done, and the grids
-    of the refined faces (index -> :class:`FaceGrid` over the refined surface)."""
+    of the refined faces the refinement measures on their grids (``Targets.between``; index ->
+    :class:`FaceGrid` over the refined surface): the others' grids are the caller's to make, on their final
+    knots."""
 
     part: Part
     faces: list[FaceMorph]
@@ -201,13 +203,14 @@ class Targets:
     min_span_spacings: float = MIN_SPAN_SPACINGS
 
     @classmethod
-    def of(cls, part: Part, classification: Classification, limit: float, grids: list[FaceGrid],
+    def of(cls, part: Part, classification: Classification, limit: float, grids: dict[int, FaceGrid],
            edge_grids: list[EdgeGrid], inside_elements: bool = False) -> Targets:
         """The targets of a classified field: node spacings (:meth:`Classification.spacing` of the nodes of a
         face and its edges, or of an edge; of all nodes where there are none) and the grid points of
-        ``grids`` near the nodes of faces their own nodes do not determine, and ``edge_grids`` (one per
-        edge, :func:`~hot2cold.pipeline.checks.edge_grids`); ``inside_elements``: the field is sampled
-        inside its FE elements (its spans may be shorter, :data:`MIN_SPAN_SPACINGS_ELEMENTS`)."""
+        ``grids`` (face index -> its grid; at least the :meth:`measured_faces`) near the nodes of faces their
+        own nodes do not determine, and ``edge_grids`` (one per edge,
+        :func:`~hot2cold.pipeline.checks.edge_grids`); ``inside_elements``: the field is sampled inside its FE
+        elements (its spans may be shorter, :data:`MIN_SPAN_SPACINGS_ELEMENTS`)."""
         overall = classification.spacing()
 
         def median(nodes: np.ndarray) -> float:
@@ -218,10 +221,20 @@ class Targets:
         face_spacing = np.array([median(np.concatenate(
             [classification.nodes_of(Role.FACE, f.index)]
             + [classification.nodes_of(Role.EDGE, use.edge) for use in f.uses])) for f in part.faces])
-        between = np.array([not nodes_determine(f, classification) for f in part.faces], dtype=bool)
+        between = np.zeros(len(part.faces), bool)
+        between[cls.measured_faces(part, classification)] = True
+        missing = [k for k in np.flatnonzero(between) if k not in grids]
+        if missing:
+            raise ValueError(f"faces {missing} are measured on their grids, and have none")
         return cls(limit, face_spacing, edge_spacing,
-                   [_measured(g, b) for g, b in zip(grids, between)], list(edge_grids), between,
-                   MIN_SPAN_SPACINGS_ELEMENTS if inside_elements else MIN_SPAN_SPACINGS)
+                   [_measured(grids[k], True) if b else _UNMEASURED for k, b in enumerate(between)],
+                   list(edge_grids), between, MIN_SPAN_SPACINGS_ELEMENTS if inside_elements else MIN_SPAN_SPACINGS)
+
+    @staticmethod
+    def measured_faces(part: Part, classification: Classification) -> list[int]:
+        """The faces measured on their grids (``between``): those whose own nodes do not determine them with
+        their hot knots (:func:`nodes_determine`), decided once."""
+        return [f.index for f in part.faces if not nodes_determine(f, classification)]
 
     def with_grids(self, grids: dict[int, FaceGrid]) -> Targets:
         """The same targets with the grids of the faces ``grids`` (index -> the :class:`FaceGrid` of the
@@ -245,6 +258,11 @@ def nodes_determine(face: Face, classification: Classification) -> bool:
                * (len(knot_breaks(surface.v_knots, surface.v_degree)) - 1))
     need = patches * (surface.u_degree + 1) * (surface.v_degree + 1)
     return len(classification.nodes_of(Role.FACE, face.index)) >= need
+
+
+#: The grid of a face the refinement measures at its nodes only.
+_UNMEASURED = FaceGrid(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool),
+                       np.zeros(0))
 
 
 def _measured(grid: FaceGrid, between: bool) -> FaceGrid:
@@ -631,7 +649,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose curve
     object changes counts as changed);
     ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of each of the (refined) ``faces`` of
-    ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`).  Returns the refined part
+    ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`; asked for the faces measured on their grids
+    only).  Returns the refined part
     (hot geometry, same shape), the final morphs and one record per face and edge that was refined or missed.
     """
     limit = targets.limit
@@ -660,7 +679,6 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     stuck_faces: set[int] = set()                # faces and edges that miss where no span may be halved
     stuck_edges: set[int] = set()
     measured = set(np.flatnonzero(targets.between).tolist())     # faces measured on their grids
-    stale: set[int] = set()                       # refined faces whose grids are still the hot knots' ones
     chased = [np.full(len(cls.nodes_of(Role.FACE, f.index)), np.nan) for f in part.faces]   # error when marked
     stalled = [np.zeros(len(c), bool) for c in chased]    # nodes a finer net did not bring closer
     rounds = 0
@@ -705,10 +723,10 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         part = inserted.part
         face_added += inserted.face_added
         edge_added += inserted.edge_added
-        # only the faces measured on their grids need them each round; the others' once, at the end
+        # only the faces measured on their grids need them each round (the caller grids the others once their
+        # knots are final)
         refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured)
         grids.update(refitted.grids)
-        stale |= inserted.faces - measured
         targets = targets.with_grids(refitted.grids)
         face_morphs, edge_morphs = refitted.faces, refitted.edges
         edge_rounds[list(inserted.edges)] += 1
@@ -723,8 +741,6 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                  len(inserted.faces), len(inserted.edges),
                  max([worst(e.error) for e in face_err] + [worst(e.error) for e in edge_err] + [0.0]))
 
-    if stale:
-        grids.update(zip(sorted(stale), regrid(part, sorted(stale))))
     face_reports = []
     for k, (face, hot) in enumerate(zip(part.faces, hot_faces)):
         missed = max(face_before[k]) > limit
