@@ -624,7 +624,7 @@ def test_a_node_the_field_around_it_does_not_follow_is_not_chased(blade_1mm):
     face passes it and them, so once a round that refined the face for it leaves it where it was (above
     STALL_SHARE of its error), it is left, and the report says so; the rest of the part is refined as without
     it.  (Rotor 37's
-    field resampled onto 1 M nodes: 28 such nodes took its pressure side through six more rounds, to 2 664
+    field resampled onto 1 M nodes: nodes like it took its faces through seven rounds, to 2 664 and 1 512
     poles, and kinked its tangent edges by 1.3 to 3.6 degrees.)"""
     shape, nodes = blade_1mm
     disp = _bend(2e-4)(nodes)

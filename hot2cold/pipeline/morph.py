@@ -81,8 +81,8 @@ _KINK_PROMISE_DEG = 0.01
 _G1_REFINEMENTS = 2
 #: A refinement for G1 adds poles to the faces along the edges: it is taken where it leaves at most this share
 #: of what those edges were above the promise in all.  NIST FTC-08's and the filleted block's leave none; on
-#: Rotor 37 at 1 M nodes, 0.0386 -> 0.0336 deg for 960 -> 1452 and 783 -> 1110 poles, and a second trial
-#: (16 s) that found 0.117.
+#: Rotor 37 at 1 M nodes the first left 0.0336 of 0.0386 deg for 690 -> 960 and 609 -> 783 poles, and a
+#: second trial (16 s) found 0.117.
 _G1_GAIN = 0.5
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
