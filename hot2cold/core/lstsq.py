@@ -394,7 +394,10 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
             rc = data()
             if steering is None:
                 return rc, None
-            top = _sigma_max(rc[:, :n])
+            try:
+                top = _sigma_max(rc[:, :n])
+            except scipy.sparse.linalg.ArpackError:                  # the dense way, at the SVD's cost
+                top = float(scipy.linalg.svdvals(rc[:, :n], check_finite=False)[0])
             return _triangular_factor(steering, f, n, block_rows, block_bytes, start=rc), top or None
 
         rc, scale = factor()
@@ -463,8 +466,6 @@ def _extremes(r: np.ndarray) -> tuple[float, float]:
     band = np.zeros((width + 1, n))                      # LAPACK's upper band storage: band[w + i - j, j]
     for d in range(width + 1):
         band[width - d, d:] = np.diagonal(r, d)
-    sparse_r = scipy.sparse.csr_array(r)
-    sparse_rt = sparse_r.T.tocsr()
 
     def solve(v: np.ndarray, trans: str) -> np.ndarray:
         x, info = scipy.linalg.lapack.dtbtrs(band, v.reshape(n, 1), uplo="U", trans=trans)
@@ -472,22 +473,24 @@ def _extremes(r: np.ndarray) -> tuple[float, float]:
             raise np.linalg.LinAlgError(f"dtbtrs info {info}")
         return x[:, 0]
 
-    start = np.random.default_rng(0).standard_normal(n)
-    gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: sparse_rt @ (sparse_r @ v),
-                                              dtype=float)
     inverse_gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: solve(solve(v, "T"), "N"),
                                                       dtype=float)
-    top = scipy.sparse.linalg.eigsh(gram, k=1, which="LA", v0=start, tol=LANCZOS_TOL,
-                                    return_eigenvectors=False)[0]
-    bottom = scipy.sparse.linalg.eigsh(inverse_gram, k=1, which="LA", v0=start, tol=LANCZOS_TOL,
+    bottom = scipy.sparse.linalg.eigsh(inverse_gram, k=1, which="LA", v0=_lanczos_start(n), tol=LANCZOS_TOL,
                                        return_eigenvectors=False)[0]
-    return float(np.sqrt(top)), float(1.0 / np.sqrt(bottom))
+    return _sigma_max(r), float(1.0 / np.sqrt(bottom))
+
+
+def _lanczos_start(n: int) -> np.ndarray:
+    """The fixed random start ``(n,)`` of the Lanczos iterations, so that their results do not change between
+    runs."""
+    return np.random.default_rng(0).standard_normal(n)
 
 
 def _sigma_max(r: np.ndarray) -> float:
     """``sigma_1`` (the largest singular value) of an upper triangular ``r`` (n, n), zero rows allowed: the
-    largest eigenvalue of ``R^T R`` by Lanczos iteration (as :func:`_extremes`, to a relative
-    :data:`LANCZOS_TOL`), or all singular values up to ``_DENSE_EXTREMES`` unknowns."""
+    largest eigenvalue of ``R^T R`` by Lanczos iteration (ARPACK, to a relative :data:`LANCZOS_TOL`, each step
+    two sparse products with ``R``; a Ritz value, at most the true one), or all singular values up to
+    ``_DENSE_EXTREMES`` unknowns."""
     n = len(r)
     if n <= _DENSE_EXTREMES:
         return float(scipy.linalg.svdvals(r, check_finite=False)[0]) if n else 0.0
@@ -496,11 +499,8 @@ def _sigma_max(r: np.ndarray) -> float:
         return 0.0
     sparse_rt = sparse_r.T.tocsr()
     gram = scipy.sparse.linalg.LinearOperator((n, n), matvec=lambda v: sparse_rt @ (sparse_r @ v), dtype=float)
-    try:
-        top = scipy.sparse.linalg.eigsh(gram, k=1, which="LA", v0=np.random.default_rng(0).standard_normal(n),
-                                        tol=LANCZOS_TOL, return_eigenvectors=False)[0]
-    except scipy.sparse.linalg.ArpackError:
-        return float(scipy.linalg.svdvals(r, check_finite=False)[0])
+    top = scipy.sparse.linalg.eigsh(gram, k=1, which="LA", v0=_lanczos_start(n), tol=LANCZOS_TOL,
+                                    return_eigenvectors=False)[0]
     return float(np.sqrt(max(top, 0.0)))
 
 
