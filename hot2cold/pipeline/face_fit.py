@@ -199,9 +199,8 @@ class FaceProblem:
     free : (nu * nv,) bool array, the poles solved for.
     rows : the design and right-hand side ``(A (s, n_free), B (s, 3))``, or their
         :class:`~hot2cold.core.lstsq.ReducedRows` where there are more rows than free poles.
-    noisy_rows : int, the rows that carry the field's noise (the face's nodes).
     prior : callable, the field's estimate at the free poles ``(n_free, 3)`` (:func:`_field_prior`).
-    nodes, edge_rows, artificial, tied : as :class:`FaceMorph`.
+    nodes, edge_rows, artificial, tied : as :class:`FaceMorph` (the nodes' rows carry the field's noise).
     """
 
     face: int
@@ -209,7 +208,6 @@ class FaceProblem:
     delta: np.ndarray
     free: np.ndarray
     rows: object
-    noisy_rows: int
     prior: Callable[[], np.ndarray]
     nodes: int
     edge_rows: int
@@ -281,9 +279,8 @@ def face_problem(face: Face, part: Part, cls: Classification, field: Displacemen
         design = basis[:, free]
         del basis             # one design matrix held through the solve (a face's may hold millions of entries)
         rows = reduce_rows(design, rhs) if reduce and design.shape[0] > design.shape[1] else (design, rhs)
-    return FaceProblem(face.index, surface, delta, free, rows, len(nodes),
-                       lambda: _field_prior(surface, free, delta, estimator), len(nodes), edge_rows, len(centres),
-                       tuple(sorted(set(tied))))
+    return FaceProblem(face.index, surface, delta, free, rows, lambda: _field_prior(surface, free, delta, estimator),
+                       len(nodes), edge_rows, len(centres), tuple(sorted(set(tied))))
 
 
 def solve_face(problem: FaceProblem, settings: Settings, noise: float = 0.0, turn: tuple | None = None
@@ -302,7 +299,7 @@ def solve_face(problem: FaceProblem, settings: Settings, noise: float = 0.0, tur
             steer = (extra[:, free], turn[1] - extra[:, ~free] @ flat[~free])
         a, b = (problem.rows, None) if isinstance(problem.rows, ReducedRows) else problem.rows
         sol = solve_tsvd(a, b, settings.svd_epsilon, prior=problem.prior, noise=noise,       # eq. (19)-(20)
-                         noisy_rows=problem.noisy_rows, steer=steer)
+                         noisy_rows=problem.nodes, steer=steer)
         flat[free] = sol.x
         rank, condition = sol.rank, sol.condition
     return FaceMorph(problem.face, surface.with_poles(surface.poles + delta), problem.nodes, problem.edge_rows,
