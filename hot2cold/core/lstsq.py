@@ -375,6 +375,7 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2   # the residual the noise leaves
     scale = None                                  # sigma_1 of the data's A where steering rows are added
     if reduced is not None or s + extra.shape[0] > n:
+        steering = _Rows(extra, n, block_bytes) if extra.shape[0] else None
         if reduced is None:
             rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
 
@@ -383,11 +384,10 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
 
             total = float(np.sum(b2 * b2))
         else:
-            def data() -> np.ndarray:
-                return reduced.factor.copy()
+            def data() -> np.ndarray:           # copied only where steering rows are reduced into it in place
+                return reduced.factor if steering is None else reduced.factor.copy()
 
             total = reduced.square_sum
-        steering = _Rows(extra, n, block_bytes) if extra.shape[0] else None
 
         def factor() -> tuple[np.ndarray, float | None]:
             """``[R | C]`` of ``[A | B; E | F]``, and ``sigma_1`` of ``A``'s own ``R`` with steering rows."""
