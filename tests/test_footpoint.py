@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from hot2cold.core.bspline import BSplineSurface, evaluate_surface, surface_normals
-from hot2cold.pipeline.classify import classify_nodes, start_grid
+from hot2cold.pipeline.classify import START_SPACING, classify_nodes, start_grid
 from hot2cold.core.domain import DomainRaster, Trim
 from hot2cold.io.field import as_field
 from hot2cold.core.footpoint import project_to_surface, surface_distances, surface_distances_above
@@ -53,7 +53,7 @@ def test_newton_matches_kernel(part):
         points, uv = _near_surface_nodes(face, 300, 0.05, rng)
         box = projector.face_box(face.index)
         size = box[[1, 3]] - box[[0, 2]]
-        grid, grid_uv = start_grid(face, part.diagonal / 150)
+        grid, grid_uv = start_grid(face, START_SPACING * part.diagonal)
         start = grid_uv[cKDTree(grid).query(points)[1]]
         fp = project_to_surface(face.surface, points, start, box)
         ref_uv, ref_dist = projector.to_face(face.index, points)

@@ -228,3 +228,25 @@ def test_field_estimator_far_from_a_thin_plate():
     assert np.abs(affine(far) - (far @ A.T + B - far)).max() <= 1e-10
     quadratic = FieldEstimator(walls, _quadratic_field(walls))
     assert np.abs(quadratic(far) - _quadratic_field(far)).max() <= 1e-10
+
+
+def test_field_strain_is_the_largest_ratio_over_the_nearest_neighbours():
+    """``FieldScale.strain``: the largest ``|du| / |dx|`` of a node and its nearest neighbours, as by brute force;
+    a node given twice (it feeds two solids) is one point, not an infinite strain."""
+    from hot2cold.core.model import Classification, Role
+    from hot2cold.io.field import DisplacementField
+    from hot2cold.pipeline.checks import _STRAIN_NEIGHBOURS, FieldScale
+
+    rng = np.random.default_rng(5)
+    points = rng.uniform(0, 10, (400, 3))
+    disp = 1e-3 * rng.normal(size=(400, 3))
+    points[1], disp[1] = points[0], disp[0] + 1.0                   # the same point twice
+    n = len(points)
+    cls = Classification(np.full(n, Role.FACE), np.zeros(n, int), np.zeros((n, 2)), np.full(n, np.nan), points,
+                         np.zeros(n), 0.1, 0.05)
+    strain = FieldScale.of(cls, DisplacementField(points, disp)).strain
+    d, j = cKDTree(points).query(points, k=_STRAIN_NEIGHBOURS + 1)
+    expected = max(np.linalg.norm(disp[j[i, m]] - disp[i]) / d[i, m]
+                   for i in range(n) for m in range(1, _STRAIN_NEIGHBOURS + 1) if d[i, m] > 0)
+    assert strain == pytest.approx(expected, rel=1e-12)
+    assert strain > 1e-4

@@ -305,9 +305,14 @@ class FieldScale:
         if len(points) > 1:
             k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
             d, j = kd_tree(points).query(points, k=k, workers=-1)
-            du = np.linalg.norm(disp[j[:, 1:]] - disp[:, None, :], axis=2)
-            apart = d[:, 1:] > 0           # the rows of one node that feeds two solids are one point
-            strain = float((du[apart] / d[:, 1:][apart]).max()) if apart.any() else 0.0
+            d, j = d[:, 1:], j[:, 1:]
+            du = disp[j] - disp[:, None, :]                                        # (n, k - 1, 3)
+            # the largest ratio found on the squares (no square root per pair), then taken as it is
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.einsum("nkc,nkc->nk", du, du) / (d * d)
+            ratio[d <= 0] = -1.0           # the rows of one node that feeds two solids are one point
+            i, m = np.unravel_index(np.argmax(ratio), ratio.shape)
+            strain = float(np.linalg.norm(du[i, m]) / d[i, m]) if ratio[i, m] >= 0 else 0.0
         return cls(largest, strain, classification.node_distance)
 
     @property
