@@ -184,3 +184,34 @@ def test_distances_above_a_limit_are_exact_there_and_at_the_largest(limit):
         np.testing.assert_array_equal(found, exact)
     else:                                      # the points within the limit keep their bounds, unprojected
         assert np.count_nonzero(found != exact) > 1000           # measured: 1570 of 5000 at 1e-3 mm
+
+
+def test_candidate_faces_are_those_of_the_k_nearest_samples():
+    """``_candidates``: a point's owners are those of its ``k`` nearest samples within ``margin`` of its
+    nearest, none beyond ``reach + margin``; the points whose nearest sample is clear of other owners' take
+    its owner alone, as from their ``k`` nearest (samples of two owners at one point included)."""
+    from scipy.spatial import cKDTree
+
+    from hot2cold.pipeline.classify import _candidates
+
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        samples = rng.uniform(0, 5, (int(rng.integers(2, 300)), 3))
+        owner = rng.integers(0, 4, len(samples))
+        samples = np.concatenate([samples, samples[:5]])             # edge samples: one point, two owners
+        owner = np.concatenate([owner, owner[:5] + 1])
+        points = rng.uniform(-0.5, 5.5, (200, 3))
+        reach, margin, k = rng.uniform(0, 0.5), rng.uniform(0, 0.4), int(rng.integers(1, 30))
+        node, face = _candidates(cKDTree(samples), owner, points, reach, margin, k)
+        got = set(zip(node.tolist(), face.tolist()))
+        d = np.linalg.norm(points[:, None] - samples[None], axis=2)
+        kth = np.sort(d, axis=1)[:, min(k, len(samples)) - 1]
+        surely, maybe = set(), set()          # a sample tied with the k-th nearest may be taken or not
+        for i in range(len(points)):
+            d0 = d[i].min()
+            if d0 <= reach + margin:
+                within = d[i] <= d0 + margin
+                surely |= {(i, int(o)) for o in owner[within & (d[i] < kth[i])]}
+                maybe |= {(i, int(o)) for o in owner[within & (d[i] <= kth[i])]}
+        assert surely <= got <= maybe, trial
+        assert np.all(np.diff(face.astype(np.int64) * len(points) + node) > 0)      # by owner, then point
