@@ -39,6 +39,9 @@ process per blade and size so that its peak memory is its own:
   distance to 1e-9 mm and the same parameters to 1e-9 of the face's box; nodes that the classification
   gives to an edge or vertex must have their direct foot point on one of that edge's or vertex's faces.
 
+The morph runs its faces' work in ``--threads`` threads (``Settings.threads``; default the process's cores, as
+``hot2cold morph`` runs it), the direct approach in one: ``--threads 1`` gives the ratio of one thread to one.
+
 The targets of issue 16 are printed against what was reached: classify >= 10x the direct approach at 10 k nodes
 and >= 30x at 100 k, with identical results; peak memory <= 1 GB at 100 k, and at 1 M <= 2 GB with the morph
 end to end <= 30 s; and of issue 14: against the exact geometry, the largest size no worse than the smallest.
@@ -47,6 +50,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -174,12 +178,13 @@ def exact_error(cold: Path, blade: str = "rotor37") -> tuple[float, float, list[
     return float(every.max()), float(every.mean()), [float(d.max()) for d in dists]
 
 
-def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37") -> dict:
-    """Run one size of ``blade`` in this process; returns its figures."""
+def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37", threads: int = 1) -> dict:
+    """Run one size of ``blade`` in this process, its faces' work in up to ``threads`` threads; returns its
+    figures."""
     from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
 
-    settings = Settings(blas_threads=1)     # as the command line runs it
+    settings = Settings(blas_threads=1, threads=threads)     # as the command line runs it, with its cores
     start = time.perf_counter()
     result = morph(STEPS[blade], field, settings)
     total = time.perf_counter() - start
@@ -190,7 +195,7 @@ def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37") -> dict:
         exact = exact_error(Path(tmp) / "cold.step", blade)
     t = result.report.timings
     out = {
-        "blade": blade, "nodes": len(result.field.points),
+        "blade": blade, "nodes": len(result.field.points), "threads": threads,
         "load": t["read"] + t["load"], "classify": t["classify"], "fit": t["edges"] + t["faces"],
         "refine": t.get("refine", 0.0), "g1": t.get("g1", 0.0) + t.get("g2", 0.0),
         "rebuild_sew": t["rebuild"] + t["sew"], "report": t["report"], "write": write,
@@ -219,13 +224,17 @@ def main(argv=None) -> int:
     parser.add_argument("--direct-max", type=int, default=100_000,
                         help="run the direct approach for sizes up to this (default 100000)")
     parser.add_argument("--cache", type=Path, default=ROOT / "benchmarks" / ".cache")
+    cores = len(os.sched_getaffinity(0))
+    parser.add_argument("--threads", type=int, default=cores,
+                        help=f"Settings.threads of the morph (default: this process's cores, {cores}, as "
+                             f"hot2cold morph runs it; the direct approach runs in one)")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)        # child process: one size
     parser.add_argument("--field", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--direct", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     blades = args.blades.split(",")
     if args.one is not None:
-        print(json.dumps(one(args.one, args.field, args.direct, blades[0])))
+        print(json.dumps(one(args.one, args.field, args.direct, blades[0], args.threads)))
         return 0
     for blade in blades:
         if blade not in STEPS:
@@ -237,7 +246,8 @@ def main(argv=None) -> int:
             print(f"{blade}, {n} nodes:", flush=True)
             field = resampled(n, args.cache, blade)
             child = subprocess.run([sys.executable, __file__, "--one", str(n), "--field", str(field),
-                                    "--blades", blade] + (["--direct"] if n <= args.direct_max else []),
+                                    "--blades", blade, "--threads", str(args.threads)]
+                                   + (["--direct"] if n <= args.direct_max else []),
                                    capture_output=True, text=True, check=False)
             if child.returncode != 0:
                 print(child.stderr[-3000:])
@@ -259,7 +269,7 @@ def _identical(c: dict) -> bool:
 def _summary(blade: str, rows: list[dict]) -> None:
     """Print the table of ``rows`` (one blade's sizes) and the targets."""
     print()
-    print(f"{blade}:")
+    print(f"{blade} (the morph in {rows[0]['threads'] if rows else '?'} threads):")
     head = ("nodes", "load", "classify", "fit", "refine", "G1", "rebuild+sew", "report", "write", "total",
             "peak MB", "us/node", "direct", "ratio")
     print(" ".join(f"{h:>11}" for h in head))

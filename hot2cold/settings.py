@@ -97,6 +97,11 @@ class Settings:
         running, edges 22 s and faces 10 s with OpenBLAS's default threads, 0.5 s and 2.5 s with one.
         None (the default) leaves the library as it is; the ``hot2cold`` command holds its own process to
         one thread around its morph.
+    threads : int
+        Threads the morph's work per face may run in (foot points, grids, fits; the kernel's calls still run one
+        at a time): the results are the same for any count.  The ``hot2cold morph`` command takes the
+        process's cores; a batch runs one job per core, each in one thread; 1 (the default) for a morph called
+        from Python, which may have other work for the cores.
     extrapolate : bool
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
@@ -135,6 +140,7 @@ class Settings:
     continuity: Continuity = Continuity.G1
     g2_tolerance: float = 0.01
     blas_threads: int | None = None
+    threads: int = 1
     extrapolate: bool = False
     element_points: bool = True
     max_displacement_rel: float = 0.1
@@ -162,6 +168,8 @@ class Settings:
             raise ValueError(f"max_refinements must be at least 0, got {self.max_refinements}")
         if self.blas_threads is not None and self.blas_threads < 1:
             raise ValueError(f"blas_threads must be at least 1 or None, got {self.blas_threads}")
+        if self.threads < 1:
+            raise ValueError(f"threads must be at least 1, got {self.threads}")
         if self.edge_samples_per_span < 1:
             raise ValueError(f"edge_samples_per_span must be at least 1, got {self.edge_samples_per_span}")
 

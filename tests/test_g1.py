@@ -568,7 +568,8 @@ def test_kink_misses_are_the_edge_points_kinked_beyond_the_limit_on_both_faces()
 def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_nodes):
     """G1 and G2 fit a face on a tangent edge again with other turning or bending rows only: its rows are
     reduced once (a face with 470 000 nodes took 0.3 s of QR and 0.1 s of rows for each turn) and each new set
-    of steering rows gives the fit morph_face gives with them; a new edge morph is a new problem."""
+    of steering rows gives the fit morph_face gives with them, in this context and in it on another part
+    (:meth:`MorphContext.with_part`); a new edge morph is a new problem."""
     from dataclasses import replace
 
     from hot2cold.core.lstsq import ReducedRows
@@ -599,6 +600,10 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
             kept = context._problems[k][1]
             assert isinstance(kept.rows, ReducedRows)
         assert context._problems[k][1] is kept                            # read once
+    # the context on a refined part (G1 after the refinement, G1's own trial) finds the same face's rows
+    moved = context.with_part(replace(part))
+    moved.fit_face(moved.part, face, edges, (rows, targets))
+    assert moved._problems[k][1] is kept
     use = face.uses[0].edge
     edges[use] = replace(edges[use])                                      # the same curve, a new morph
     context.fit_face(part, face, edges, (rows, targets))

@@ -212,6 +212,7 @@ def _write_exports(args, result):
 def _morph(args) -> int:
     from threadpoolctl import threadpool_limits
 
+    from .batch import cores
     from .run import run_morph, tolerance_missed, write_cold
 
     check_input_file(args.hot, "STEP file")            # refused before anything is loaded
@@ -224,8 +225,9 @@ def _morph(args) -> int:
         _html_writer()
     progress = None if args.quiet else _Progress(sys.stderr)
     try:
-        with threadpool_limits(1, "blas"):  # this process's BLAS: the small fits gain nothing from threads
-            result = run_morph(args.hot, args.field, MorphOptions.from_args(args), progress)
+        with threadpool_limits(1, "blas"):  # this process's BLAS: the small fits gain nothing from threads,
+            # but the faces do, side by side (Settings.threads)
+            result = run_morph(args.hot, args.field, MorphOptions.from_args(args), progress, threads=cores())
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Iterator
 
@@ -15,13 +16,15 @@ from ..io.atomic import write_atomically
 from .options import MorphOptions
 
 
-def run_morph(hot, field, options: MorphOptions, progress=None):
+def run_morph(hot, field, options: MorphOptions, progress=None, threads: int = 1):
     """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path) with ``field`` (field file path) under
-    ``options``; returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked: :func:`write_cold`
+    ``options``, in up to ``threads`` threads (``Settings.threads``: ``hot2cold morph`` gives its cores, a
+    batch job one); returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked: :func:`write_cold`
     writes the report first and then refuses an invalid part."""
     from ..pipeline.morph import morph
 
-    return morph(hot, field, options.to_settings(), **options.morph_arguments(), progress=progress, check=False)
+    settings = replace(options.to_settings(), threads=threads)
+    return morph(hot, field, settings, **options.morph_arguments(), progress=progress, check=False)
 
 
 def write_json(data: dict, path: str | os.PathLike) -> None:

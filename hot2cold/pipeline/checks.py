@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.threads import map_threads
 from ..core.trees import kd_tree
 from ..core.bspline import (NORMAL_RTOL, evaluate_curve, evaluate_surface, knot_breaks, surface_basis,
                             surface_derivative_bases)
@@ -490,7 +491,7 @@ class FaceNodes:
 def face_grids(part: Part, projector: Projector, classification: Classification, field: DisplacementField,
                estimator: Callable[[np.ndarray], np.ndarray], neighbours: int,
                faces: list[int] | None = None, elements: ElementField | None = None,
-               face_nodes: FaceNodes | None = None) -> list[FaceGrid]:
+               face_nodes: FaceNodes | None = None, threads: int = 1) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the
     part's diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs
     its own grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined
@@ -512,7 +513,8 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
     elevation keep the surface), so one set of grids serves it and the checks of the cold part.
     ``face_nodes``: the faces' nodes and estimates kept from earlier calls with the same ``classification``,
-    ``field`` and ``neighbours`` (:class:`FaceNodes`; None: found anew)."""
+    ``field`` and ``neighbours`` (:class:`FaceNodes`; None: found anew).  The faces are gridded in up to
+    ``threads`` threads (:func:`~hot2cold.core.threads.map_threads`)."""
     if face_nodes is None:
         face_nodes = FaceNodes(classification, field, neighbours)
     elif (face_nodes.classification is not classification or face_nodes.field is not field
@@ -520,8 +522,8 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         raise ValueError("face_nodes were kept for another classification, field or neighbour count")
     spacing = CHECK_SPACING * part.diagonal
     overall = GRID_REACH * classification.spacing()
-    grids = []
-    for face in part.faces if faces is None else [part.faces[k] for k in faces]:
+
+    def grid(face) -> FaceGrid:
         uv = face_grid(face, spacing, projector)
         hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
         expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
@@ -546,8 +548,12 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
             on, disp, slack_on = elements(hot)
             expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
         support = max(reach, overall) if np.isfinite(reach) else overall
-        grids.append(FaceGrid(uv, hot, expected, slack, near, node_distance, support))
-    return grids
+        return FaceGrid(uv, hot, expected, slack, near, node_distance, support)
+
+    chosen = part.faces if faces is None else [part.faces[k] for k in faces]
+    for face in chosen:                 # each face's nodes found here, the threads only read them
+        face_nodes.of(part, face)
+    return map_threads(grid, chosen, threads, cost=[len(face_nodes.of(part, f).nodes) for f in chosen])
 
 
 @dataclass(frozen=True, eq=False)

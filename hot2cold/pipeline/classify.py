@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.threads import map_threads
 from ..core.trees import kd_tree
 from ..core.bspline import (bend_parameters, evaluate_curve, evaluate_surface, grid_points, polyline_length,
                             surface_normals)
@@ -40,12 +41,19 @@ log = logging.getLogger(__name__)
 
 #: Most points of a face's start grid along one parameter direction.
 _MOST = 2000
-#: The spacing of the start grids and of the sample points that name each node's candidate faces
-#: (:func:`_face_cloud`), times the part's diagonal; most sample points along a face's parameter direction.
-#: The candidates are the faces with a sample within two sample spacings of a node's nearest: on the thin
-#: Rotor 37 blade, samples 1/150 of the diagonal apart named 1.43 M pairs of node and face (each one
-#: projected) for its 0.98 M nodes, both sides of the blade for many; 1/300 apart, 1.16 M pairs.
-START_SPACING, CLOUD_SPACING, _CLOUD_MOST = 1 / 150, 1 / 300, 400
+#: The spacing of the start grids, times the part's diagonal.
+START_SPACING = 1 / 150
+#: The sample points that name each node's candidate faces (:func:`_face_cloud`) lie about the spacing of the
+#: start grids apart, or closer, down to ``CLOUD_FINEST`` of the diagonal, where the nodes are more than
+#: ``CLOUD_NODES`` times as many as the samples would be: a node's candidates are the faces with a sample
+#: within two spacings of its nearest sample, and each pair of node and face costs a projection.  On the thin
+#: Rotor 37 blade, samples 1/150 of the diagonal apart named 1.43 M pairs for its 0.98 M nodes (both sides
+#: of the blade for many), 1/300 apart 1.16 M, for 80 000 samples instead of 23 000.  With fewer nodes the
+#: samples' own cost (each one's trim state asked of the kernel) outweighs what they save: at 10 000 nodes
+#: 1/300 took classification from 0.53 to 0.74 s.
+CLOUD_FINEST, CLOUD_NODES = 1 / 300, 10
+#: Most sample points of the cloud along a face's parameter direction.
+_CLOUD_MOST = 400
 
 
 def _lengths(face, n: int = 9) -> tuple[float, float]:
@@ -57,12 +65,23 @@ def _lengths(face, n: int = 9) -> tuple[float, float]:
     return length_u, length_v
 
 
-def _face_cloud(part: Part, projector: Projector, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points ``(m, 3)`` about ``spacing`` apart inside every face's trimmed domain and on its boundary (the
-    face's surface at its pcurves), and their face ``(m,)``: they name each node's candidate faces."""
+def cloud_spacing(lengths: list[tuple[float, float]], nodes: int, diagonal: float) -> float:
+    """The spacing (mm) of :func:`_face_cloud`'s samples on faces whose longest parameter lines are ``lengths``
+    (mm, per face), for ``nodes`` nodes: ``START_SPACING`` of the ``diagonal``, or closer, down to
+    ``CLOUD_FINEST`` of it, where the samples would be fewer than ``1 / CLOUD_NODES`` of the nodes."""
+    area = sum(length_u * length_v for length_u, length_v in lengths)
+    wanted = np.sqrt(CLOUD_NODES * area / max(nodes, 1))
+    return float(np.clip(wanted, CLOUD_FINEST * diagonal, START_SPACING * diagonal))
+
+
+def _face_cloud(part: Part, projector: Projector, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Points ``(m, 3)`` about :func:`cloud_spacing` apart (for ``nodes`` nodes) inside every face's trimmed
+    domain and on its boundary (the face's surface at its pcurves), their face ``(m,)`` and that spacing
+    (mm): they name each node's candidate faces."""
+    lengths = [_lengths(face) for face in part.faces]
+    spacing = cloud_spacing(lengths, nodes, part.diagonal)
     points, owners = [], []
-    for face in part.faces:
-        length_u, length_v = _lengths(face)
+    for face, (length_u, length_v) in zip(part.faces, lengths):
         u0, u1, v0, v1 = face.uv_box
         nu = int(np.clip(np.ceil(length_u / spacing), 2, _CLOUD_MOST)) + 1
         nv = int(np.clip(np.ceil(length_v / spacing), 2, _CLOUD_MOST)) + 1
@@ -73,7 +92,7 @@ def _face_cloud(part: Part, projector: Projector, spacing: float) -> tuple[np.nd
         uv = np.clip(uv, face.surface.domain[::2], face.surface.domain[1::2])
         points.append(evaluate_surface(face.surface, uv[:, 0], uv[:, 1]))
         owners.append(np.full(len(uv), face.index))
-    return np.concatenate(points), np.concatenate(owners)
+    return np.concatenate(points), np.concatenate(owners), spacing
 
 
 def start_grid(face, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -149,8 +168,11 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
     dist, idx = tree.query(points[rest], k=k, workers=-1)
     dist, idx = dist.reshape(len(rest), k), idx.reshape(len(rest), k)
     keep = (dist <= dist[:, :1] + margin) & (dist[:, :1] <= reach + margin)
-    rows, cols = np.nonzero(keep)
-    keys.append(np.unique(owner[idx[rows, cols]].astype(np.int64) * len(points) + rest[rows]))
+    own = np.where(keep, owner[idx], -1)
+    own.sort(axis=1)                                 # each point's owners in a row, once each: where they change
+    rows, cols = np.nonzero((own >= 0) & np.concatenate([np.ones((len(rest), 1), bool), np.diff(own, axis=1) != 0],
+                                                        axis=1))
+    keys.append(own[rows, cols].astype(np.int64) * len(points) + rest[rows])
     key = np.sort(np.concatenate(keys))
     return key % len(points), key // len(points)
 
@@ -168,9 +190,8 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     points = field.points
     n = len(points)
     spacing = START_SPACING * part.diagonal
-    cloud_spacing = CLOUD_SPACING * part.diagonal
-    cloud, cloud_face = _face_cloud(part, projector, cloud_spacing)
-    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * cloud_spacing)
+    cloud, cloud_face, apart = _face_cloud(part, projector, n)
+    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * apart)
     boundary = _Boundary.of(part)
     group_of_face = np.array([face.solid for face in part.faces], int)
     groups = np.unique(group_of_face)
@@ -178,7 +199,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     for g in groups:
         keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
         records.append(_classify_group(part, points, pair_node[keep], pair_face[keep], node_distance,
-                                       edge_distance, spacing, projector, boundary))
+                                       edge_distance, spacing, projector, boundary, settings.threads))
     if len(records) == 1:
         role, owner, uv, t, foot, distance = records[0]
         node = np.arange(n)
@@ -248,10 +269,11 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
 
 def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
                     node_distance: float, edge_distance: float, spacing: float, projector: Projector,
-                    boundary: _Boundary):
+                    boundary: _Boundary, threads: int = 1):
     """Classify ``points (N, 3)`` on the faces of the candidate pairs ``(pair_node, pair_face)`` (each
     ``(c,)``, sorted by face): the arrays role, owner ``(N,)``, uv ``(N, 2)``, t ``(N,)``, foot ``(N, 3)``,
-    distance ``(N,)`` of :class:`Classification`."""
+    distance ``(N,)`` of :class:`Classification`.  The faces' foot points are found in up to ``threads``
+    threads (:func:`~hot2cold.core.threads.map_threads`), then offered to the nodes face by face."""
     n = len(points)
     role = np.full(n, Role.IGNORED)
     owner = np.full(n, -1)
@@ -278,9 +300,10 @@ def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_
     # Newton's last iterate on this face (which has no foot point inside the box nearer still: that would
     # be a second local minimum within ``node_distance``).
     unsettled = []
-    for k, group in runs(pair_face):
-        nodes = pair_node[group]
-        fp = _foot_points(part.faces[k], points[nodes], spacing, projector.face_box(k))
+    faces = [(k, pair_node[group], projector.face_box(k)) for k, group in runs(pair_face)]
+    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], spacing, job[2]), faces,
+                       threads, cost=[len(nodes) for _, nodes, _ in faces])
+    for (k, nodes, _), fp in zip(faces, feet):
         offer(k, nodes[fp.settled], fp.uv[fp.settled], fp.distance[fp.settled])
         taken = fp.settled & (owner[nodes] == k) & (best[nodes] == fp.distance)
         unsettled.append((k, nodes[~taken], fp.distance[~taken]))

@@ -33,6 +33,7 @@ from .edge_fit import EdgeMorph
 from ..io.field import DisplacementField
 from ..core.lstsq import ReducedRows, reduce_rows, solve_tsvd
 from ..core.model import Classification, EdgeUse, Face, Part, Role, Side, side_along
+from ..core.threads import map_threads
 from ..settings import Settings
 
 log = logging.getLogger(__name__)
@@ -333,13 +334,18 @@ def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_
     """Morph every face of ``part``.
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
-    domain; ``progress(done, total)`` is called after each face if given.
+    domain; ``progress(done, total)`` is called after each face if given (from the thread that fitted it,
+    with ``settings.threads`` above 1).
     """
-    out = []
-    for face in part.faces:
-        out.append(morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                              trimmed_away, noise))
+    done = iter(range(1, len(part.faces) + 1))       # next() of an iterator: one count per face, in any thread
+
+    def fit(face: Face) -> FaceMorph:
+        morph = morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away, noise)
         if progress is not None:
-            progress(len(out), len(part.faces))
+            progress(next(done), len(part.faces))
+        return morph
+
+    out = map_threads(fit, part.faces, settings.threads,
+                      cost=[len(cls.nodes_of(Role.FACE, face.index)) for face in part.faces])
     log.info("morphed %d faces", len(out))
     return out

@@ -56,6 +56,7 @@ from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evalua
                             polyline_length, refine_curve, refine_surface)
 from ..core.footpoint import curve_distances, surface_distances, surface_distances_above
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
+from ..core.threads import map_threads
 from ..io.field import DisplacementField
 from .checks import EdgeGrid, FaceGrid
 from .edge_fit import EdgeMorph
@@ -621,9 +622,9 @@ class _Refitted:
 
 
 def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph], fit_face: FitFace,
-           fit_edges: FitEdges, regrid: Regrid, gridded: set[int] | None = None) -> _Refitted:
-    """The refined edges fitted again, then the refined faces and every face on an edge that moved; the grids
-    of the refined faces (of those in ``gridded`` only, where given)."""
+           fit_edges: FitEdges, regrid: Regrid, gridded: set[int] | None = None, threads: int = 1) -> _Refitted:
+    """The refined edges fitted again, then the refined faces and every face on an edge that moved (in up to
+    ``threads`` threads); the grids of the refined faces (of those in ``gridded`` only, where given)."""
     part = inserted.part
     changed = sorted(inserted.faces if gridded is None else inserted.faces & gridded)
     grids = dict(zip(changed, regrid(part, changed))) if changed else {}
@@ -631,8 +632,10 @@ def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[
     moved = inserted.edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
     refit = set(inserted.faces) | {k for k, f in enumerate(part.faces) for use in f.uses if use.edge in moved}
     faces = list(face_morphs)
-    for k in sorted(refit):
-        faces[k] = fit_face(part, part.faces[k], fitted)
+    order = sorted(refit)
+    for k, morph in zip(order, map_threads(lambda k: fit_face(part, part.faces[k], fitted), order, threads,
+                                           cost=[part.faces[k].surface.poles.size for k in order])):
+        faces[k] = morph
     return _Refitted(faces, list(fitted), grids, refit, moved)
 
 
@@ -642,7 +645,7 @@ def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[
 
 def refine(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
            edge_morphs: list[EdgeMorph], targets: Targets, max_rounds: int, fit_face: FitFace,
-           fit_edges: FitEdges, regrid: Regrid) -> RefineResult:
+           fit_edges: FitEdges, regrid: Regrid, threads: int = 1) -> RefineResult:
     """Refine faces and edges until every error is within ``targets.limit`` mm or ``max_rounds`` are done.
 
     ``fit_face(part, face, edge_morphs) -> FaceMorph`` fits a face of a (refined) part against the given edge
@@ -652,7 +655,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     object changes counts as changed);
     ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of each of the (refined) ``faces`` of
     ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`; asked for the faces measured on their grids
-    only).  Returns the refined part
+    only); ``threads``: the faces of a round are fitted in up to that many threads.  Returns the refined part
     (hot geometry, same shape), the final morphs and one record per face and edge that was refined or missed.
     """
     limit = targets.limit
@@ -669,7 +672,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                             limit)
 
     def errors():
-        return ([face_errors(k) for k in range(len(part.faces))],
+        return (map_threads(face_errors, range(len(part.faces)), threads),
                 [_edge_errors(e, m, cls, field, g) for e, m, g in zip(part.edges, edge_morphs, targets.edge_grids)])
 
     def worst(err):
@@ -727,7 +730,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         edge_added += inserted.edge_added
         # only the faces measured on their grids need them each round (the caller grids the others once their
         # knots are final)
-        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured)
+        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured, threads)
         grids.update(refitted.grids)
         targets = targets.with_grids(refitted.grids)
         face_morphs, edge_morphs = refitted.faces, refitted.edges
@@ -735,8 +738,9 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         face_rounds[list(inserted.faces)] += 1
         refit, moved = refitted.refit, refitted.moved
         rounds += 1
-        for k in refit:                 # the others' errors stand: a face's depend on it and its edges only
-            face_err[k] = face_errors(k)
+        # the others' errors stand: a face's depend on it and its edges only
+        for k, err in zip(sorted(refit), map_threads(face_errors, sorted(refit), threads)):
+            face_err[k] = err
         for e in moved:
             edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
         log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", rounds,
@@ -784,12 +788,12 @@ class PatchRefinement:
 
 def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph],
                    points: dict[int, np.ndarray], shortest: np.ndarray, fit_face: FitFace, fit_edges: FitEdges,
-                   regrid: Regrid) -> PatchRefinement | None:
+                   regrid: Regrid, threads: int = 1) -> PatchRefinement | None:
     """The knot-span patches of each face ``k`` that hold one of ``points[k]`` ((m, 2) parameters) halved as
     :func:`refine` halves a patch that misses the tolerance (longest-edge bisection, halves at least
     ``shortest[k]`` mm long, a direction below :data:`REFINED_DEGREE` raised to it), in their parameter
     classes so that shared edges stay shared, and the morphs fitted again (``fit_face``, ``fit_edges``,
-    ``regrid`` as for :func:`refine`).  None where no such patch may be halved."""
+    ``regrid``, ``threads`` as for :func:`refine`).  None where no such patch may be halved."""
     classes = _classes(part, face_morphs)
     marks: dict = {}
     elevate: set = set()
@@ -800,6 +804,6 @@ def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[E
     inserted = _insert(part, classes, marks, elevate)
     if not inserted.faces and not inserted.edges:
         return None
-    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid)
+    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, threads=threads)
     return PatchRefinement(inserted.part, refitted.faces, refitted.edges, refitted.grids,
                            {k: tuple(int(n) for n in inserted.face_added[k]) for k in sorted(inserted.faces)})

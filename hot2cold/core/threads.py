@@ -1,0 +1,31 @@
+"""Independent pieces of work (one per face, mostly) in a few threads: the same results in the same order as
+one after the other, sooner where the machine has cores to spare.
+
+The heavy steps of a morph are numpy, scipy and k-d tree calls on large arrays, which release Python's
+global interpreter lock while they run, so two faces' foot points, grids or fits proceed side by side.
+The kernel's calls keep the lock: they run one at a time, whichever thread makes them.  A piece of work must
+not write what another one reads; each writes its own face's entries of shared caches, if any.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Iterable, Sequence, TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def map_threads(fn: Callable[[T], R], items: Iterable[T], threads: int,
+                cost: Sequence[float] | None = None) -> list[R]:
+    """``[fn(item) for item in items]``, in up to ``threads`` threads (one: in this thread, in order).
+
+    ``cost``: a guess of each item's work (its nodes, say); the costliest are started first, so that one
+    large face does not come last and run alone.  An exception of ``fn`` is raised here, that of the first
+    item in ``items``' order that raised, once every item started has ended."""
+    items = list(items)
+    if threads <= 1 or len(items) <= 1:
+        return [fn(item) for item in items]
+    order = range(len(items)) if cost is None else sorted(range(len(items)), key=lambda i: -cost[i])
+    with ThreadPoolExecutor(min(threads, len(items))) as pool:
+        futures = {i: pool.submit(fn, items[i]) for i in order}
+    return [futures[i].result() for i in range(len(items))]
