@@ -250,3 +250,25 @@ def test_field_strain_is_the_largest_ratio_over_the_nearest_neighbours():
                    for i in range(n) for m in range(1, _STRAIN_NEIGHBOURS + 1) if d[i, m] > 0)
     assert strain == pytest.approx(expected, rel=1e-12)
     assert strain > 1e-4
+
+
+def test_node_spacings_are_the_distances_to_the_nearest_other_foot_point():
+    """``Classification.spacings``: each used node's distance to the nearest foot point elsewhere, nodes that
+    share a foot point (a vertex's) counted once, NaN for unused nodes and where all feet are one point."""
+    from hot2cold.core.model import Classification, Role
+
+    rng = np.random.default_rng(2)
+    for trial in range(60):
+        n = int(rng.integers(1, 80))
+        foot = rng.normal(size=(n, 3)).round(1)                        # some coincide
+        foot[rng.integers(0, n, n // 3)] = foot[0]                     # a shared foot point
+        if trial % 10 == 0:
+            foot[:] = foot[0]
+        role = rng.choice([Role.FACE, Role.EDGE, Role.IGNORED], n)
+        cls = Classification(role, np.zeros(n, int), np.zeros((n, 2)), np.zeros(n), foot, np.zeros(n), 0.1, 0.01)
+        used = role != Role.IGNORED
+        d = np.linalg.norm(foot[:, None] - foot[used][None], axis=2)
+        d[d == 0] = np.inf
+        expected = np.where(used, d.min(axis=1, initial=np.inf), np.nan)
+        expected[np.isinf(expected)] = np.nan
+        np.testing.assert_array_equal(cls.spacings, expected)

@@ -255,9 +255,24 @@ class Classification:
 
         used = np.flatnonzero(self.used)
         nearest = np.full(len(self.role), np.nan)
-        feet = np.unique(self.foot[used], axis=0)
-        if len(feet) > 1:
-            nearest[used] = kd_tree(feet).query(self.foot[used], k=2, workers=-1)[0][:, 1]
+        feet = self.foot[used]
+        if len(feet) < 2:
+            return nearest
+        tree = kd_tree(feet)
+        found = tree.query(feet, k=2, workers=-1)[0][:, 1]
+        # a foot point shared by several nodes (a vertex's, one node's in two solids): farther neighbours, up
+        # to the nearest one elsewhere (none where all are one point)
+        shared = np.flatnonzero(found == 0.0)
+        k = 2
+        while len(shared) and k < len(feet):
+            k = min(4 * k, len(feet))
+            dist = tree.query(feet[shared], k=k, workers=-1)[0].reshape(len(shared), k)
+            apart = dist > 0.0
+            done = apart.any(axis=1)
+            found[shared[done]] = dist[done, apart[done].argmax(axis=1)]
+            shared = shared[~done]
+        found[shared] = np.nan
+        nearest[used] = found
         return nearest
 
     def spacing(self, nodes: np.ndarray | None = None) -> float:
