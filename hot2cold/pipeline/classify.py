@@ -374,8 +374,11 @@ def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv
     in_group = np.zeros(len(part.faces), bool)
     in_group[faces] = True
     if boundary.vertices is not None:
-        d_v, v_idx = boundary.vertices.query(points[used])
+        # (only the nodes within reach are looked for: the others come back at inf, index len(vertices))
+        d_v, v_idx = boundary.vertices.query(points[used], distance_upper_bound=np.nextafter(edge_distance, np.inf),
+                                             workers=-1)
         at_vertex = d_v <= edge_distance
+        v_idx = np.minimum(v_idx, len(part.vertices) - 1)
         if len(stray):
             group_vertex = np.zeros(len(part.vertices), bool)
             for edge in part.edges:
@@ -390,7 +393,7 @@ def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv
     if boundary.samples is None or len(used) == 0:
         return
     tree, sample_edge, h = boundary.samples, boundary.sample_edge, boundary.h
-    near, _ = tree.query(points[used], workers=-1)
+    near, _ = tree.query(points[used], distance_upper_bound=np.nextafter(edge_distance + h, np.inf), workers=-1)
     close = used[near <= edge_distance + h]
     pair_node, pair_edge = _candidates(tree, sample_edge, points[close], edge_distance, h)
     best = np.full(len(points), np.inf)
