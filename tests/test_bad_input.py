@@ -690,13 +690,14 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
 
 def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(box):
     """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.checks.FaceNodes`, as the
-    refinement keeps them) give the grids found anew, point for point; kept for another field they are
+    refinement keeps them) give the grids found anew, point for point, and so do grids made without their
+    slack and given it later (:func:`~hot2cold.pipeline.checks.with_slack`); kept for another field they are
     refused rather than used."""
     from hot2cold import morph
     from hot2cold.io.field import DisplacementField
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FaceNodes, face_grids
+    from hot2cold.pipeline.checks import FaceNodes, face_grids, with_slack
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -711,6 +712,13 @@ def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(b
             np.testing.assert_array_equal(g.expected, a.expected)
             np.testing.assert_array_equal(g.slack, a.slack)
             np.testing.assert_array_equal(g.node_distance, a.node_distance)
+    # made without their slack (G1's trials) and given it afterwards: the same grids, in threads too
+    lean = face_grids(part, projector, cls, field, estimator, 20, face_nodes=FaceNodes(cls, field, 20),
+                      with_slack=False)
+    assert any(np.isnan(g.slack).any() for g in lean)
+    for a, g in zip(anew, with_slack(part, lean, FaceNodes(cls, field, 20), threads=2)):
+        np.testing.assert_array_equal(g.slack, a.slack)
+        np.testing.assert_array_equal(g.expected, a.expected)
     other = DisplacementField(field.points, 2.0 * field.displacements)
     with pytest.raises(ValueError, match="face_nodes were kept for another"):
         face_grids(part, projector, cls, other, estimator, 20, face_nodes=kept)

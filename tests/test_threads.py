@@ -66,3 +66,29 @@ def test_a_morph_in_two_threads_is_the_morph_in_one(block_shape, block_nodes):
     for key in ("delta_max", "delta_mean", "valid", "g1", "refinements", "faces"):
         assert one.report.to_dict()[key] == two.report.to_dict()[key], key
     assert any(g["method"].endswith(REFINED) for g in one.report.g1)   # G1's trial was taken
+
+
+def test_the_morph_command_takes_the_cores_and_a_batch_job_one(tmp_path, monkeypatch, blade_step):
+    """``hot2cold morph`` runs the faces' work in the process's cores; a batch job (one per core) in one."""
+    import os
+
+    import hot2cold.pipeline.morph as pipeline_morph
+    from hot2cold.cli import main
+    from hot2cold.cli.options import MorphOptions
+    from hot2cold.cli.run import run_morph
+    from hot2cold.errors import InputError
+
+    seen = []
+
+    def fake_morph(hot, field, settings, **kwargs):
+        seen.append(settings.threads)
+        raise InputError("stopped here")
+
+    monkeypatch.setattr(pipeline_morph, "morph", fake_morph)
+    field = tmp_path / "field.csv"
+    field.write_text("x,y,z,dx,dy,dz\n0,0,0,0,0,0\n")
+    assert main(["morph", str(blade_step), str(field), "-o", str(tmp_path / "cold.step"), "-q"]) == 2
+    assert seen == [len(os.sched_getaffinity(0))]
+    with pytest.raises(InputError):
+        run_morph(blade_step, field, MorphOptions())               # as a batch job calls it
+    assert seen[-1] == 1

@@ -21,6 +21,7 @@ nodes (eq. 39) so that no pole is left undetermined.  Artificial rows carry the 
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass
 from typing import Callable
 
@@ -335,17 +336,19 @@ def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_
 
     ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
     domain; ``progress(done, total)`` is called after each face if given (from the thread that fitted it,
-    with ``settings.threads`` above 1).
+    with ``settings.threads`` above 1; one call at a time, ``done`` counting up).
     """
-    done = iter(range(1, len(part.faces) + 1))       # next() of an iterator: one count per face, in any thread
+    lock, done = threading.Lock(), [0]              # counts told one at a time, in order, from any thread
 
     def fit(face: Face) -> FaceMorph:
         morph = morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away, noise)
         if progress is not None:
-            progress(next(done), len(part.faces))
+            with lock:
+                done[0] += 1
+                progress(done[0], len(part.faces))
         return morph
 
-    out = map_threads(fit, part.faces, settings.threads,
-                      cost=[len(cls.nodes_of(Role.FACE, face.index)) for face in part.faces])
+    nodes = np.bincount(cls.owner[cls.role == Role.FACE], minlength=len(part.faces))
+    out = map_threads(fit, part.faces, settings.threads, cost=nodes[[face.index for face in part.faces]])
     log.info("morphed %d faces", len(out))
     return out

@@ -30,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
 from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage, check_hot, check_result,
-                     edge_grids, face_grids)
+                     edge_grids, face_grids, with_slack)
 from .classify import classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
@@ -283,8 +283,10 @@ class MorphContext:
         """:meth:`_moved_off` of each face ``k: (before, after)`` of ``changes`` (in up to ``settings.threads``
         threads): the faces that may not take ``after``, and why."""
         faces = list(changes)
+        cls = self.classification
+        nodes = np.bincount(cls.owner[cls.role == Role.FACE], minlength=len(self.part.faces))
         why = map_threads(lambda k: self._moved_off(k, *changes[k], grids[k], share), faces, self.settings.threads,
-                          cost=[len(grids[k].uv) + len(self.classification.nodes_of(Role.FACE, k)) for k in faces])
+                          cost=[len(grids[k].uv) + nodes[k] for k in faces])
         return {k: text for k, text in zip(faces, why) if text}
 
     def refit_edges(self, part: Part, edge_morphs: list[EdgeMorph], refined: set[int]) -> list[EdgeMorph]:
@@ -720,7 +722,8 @@ def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[F
     poles next to the edge: NIST FTC-08's 3x3 patches have one free pole in a second row), everything fitted
     and corrected again, and the refined part taken if it leaves at most ``_G1_GAIN`` of the kink above
     0.01 deg in all and takes no face farther from the field than G1 may (:func:`_refined_off`); up to
-    :data:`_G1_REFINEMENTS` rounds.  ``regrid(part, faces)`` gives the grids of refined faces.  Returns the
+    :data:`_G1_REFINEMENTS` rounds.  ``regrid(part, faces, slack)`` gives the grids of refined faces (made
+    without their slack here: a trial's decision reads their distances only).  Returns the
     context (its part refined where taken), the grids, the edge and face morphs and one report per tangent
     edge."""
     def corrected(ctx: MorphContext, edges: list[EdgeMorph], faces: list[FaceMorph], grids: list[FaceGrid]):
@@ -738,7 +741,7 @@ def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[F
         if not misses:
             break
         patch = refine_patches(ctx.part, face_morphs, edge_morphs, misses, shortest, ctx.fit_face,
-                               ctx.refit_edges, regrid, ctx.settings.threads)
+                               ctx.refit_edges, lambda part, faces: regrid(part, faces, False), ctx.settings.threads)
         if patch is None:
             log.info("G1: %d edges above %g deg; no patch of their faces may be halved", len(over),
                      _KINK_PROMISE_DEG)
@@ -853,10 +856,11 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     face_nodes = FaceNodes(cls, field, settings.vertex_neighbours)      # kept for every round's grids
     estimator = context.estimator
 
-    def regrid(part: Part, faces: list[int]) -> list[FaceGrid]:
-        """The grids of ``faces`` of ``part`` (the hot one or a refined one: the refinement's and G1's)."""
+    def regrid(part: Part, faces: list[int], slack: bool = True) -> list[FaceGrid]:
+        """The grids of ``faces`` of ``part`` (the hot one or a refined one: the refinement's and G1's), their
+        slack left out where not ``slack`` (:func:`~hot2cold.pipeline.checks.face_grids`)."""
         return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements,
-                          face_nodes, settings.threads)
+                          face_nodes, settings.threads, with_slack=slack)
 
     refinements, edge_refinements = (), ()
     refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
@@ -890,6 +894,8 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
         shortest = refined_spans * targets.face_spacing if refined_spans else None
         context, grids, edge_morphs, face_morphs, g1_reports = _g1(context, edge_morphs, face_morphs, corners,
                                                                    grids, shortest, regrid)
+        # the checks between the nodes need the slack the grids of a refinement G1 took were made without
+        grids = with_slack(context.part, grids, face_nodes, settings.threads)
         stages.lap("g1")
         # G2 (the paper's outlook): the curvature jumps across them measured, and removed if asked
         stages.begin("g2")

@@ -748,10 +748,12 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
                  max([worst(e.error) for e in face_err] + [worst(e.error) for e in edge_err] + [0.0]))
 
     face_reports = []
-    for k, (face, hot) in enumerate(zip(part.faces, hot_faces)):
+    reported = [k for k in range(len(part.faces)) if max(face_before[k]) > limit or face_rounds[k]]
+    residual = dict(zip(reported, map_threads(
+        lambda k: worst(node_residuals(part.faces[k], face_morphs[k], cls, field)), reported, threads)))
+    for k in reported:
+        face, hot = part.faces[k], hot_faces[k]
         missed = max(face_before[k]) > limit
-        if not missed and not face_rounds[k]:
-            continue
         s0, s1 = hot.surface, face.surface
         unresolved = int(np.count_nonzero(stalled[k] & (face_err[k].error[:len(stalled[k])] > limit)))
         face_reports.append(Refinement(
@@ -759,7 +761,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
             int(face_added[k, 0]), int(face_added[k, 1]),
             f"{s0.u_degree}x{s0.v_degree}", f"{s1.u_degree}x{s1.v_degree}",
             "x".join(map(str, s0.shape)), "x".join(map(str, s1.shape)), int(face_rounds[k]),
-            face_before[k][0], face_err[k].nodes, worst(node_residuals(face, face_morphs[k], cls, field)),
+            face_before[k][0], face_err[k].nodes, residual[k],
             face_before[k][1], face_err[k].between, unresolved))
     edge_reports = []
     for e, (edge, hot) in enumerate(zip(part.edges, hot_edges)):
