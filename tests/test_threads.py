@@ -18,7 +18,7 @@ def test_map_threads_keeps_the_order_and_starts_the_costliest_first():
         return x * x, threading.get_ident()
 
     items = list(range(10))
-    out = map_threads(work, items, 3, cost=[x % 4 for x in items])
+    out = map_threads(work, items, 3, cost=[x % 4 for x in items], large=1)
     assert [r for r, _ in out] == [x * x for x in items]
     assert len({t for _, t in out}) > 1                                  # it did run in threads
     assert started[:2] == [3, 7]                                         # cost 3 first (two threads start them)
@@ -26,6 +26,10 @@ def test_map_threads_keeps_the_order_and_starts_the_costliest_first():
     assert [r for r, _ in map_threads(work, items, 1, cost=[x % 4 for x in items])] == [x * x for x in items]
     assert started == items                                              # one thread: in order, here
     assert {t for _, t in map_threads(work, items, 1)} == {threading.get_ident()}
+    # items too small for threads (fewer than two of them reach `large`): in this thread, in order
+    started.clear()
+    out = map_threads(work, items, 3, cost=[10 if x == 4 else 1 for x in items], large=10)
+    assert started == items and {t for _, t in out} == {threading.get_ident()}
 
 
 def test_map_threads_raises_the_first_items_error():
@@ -45,7 +49,7 @@ def test_threads_must_be_positive():
         Settings(threads=0)
 
 
-def test_a_morph_in_two_threads_is_the_morph_in_one(block_shape, block_nodes):
+def test_a_morph_in_two_threads_is_the_morph_in_one(block_shape, block_nodes, monkeypatch):
     """The filleted block under the untwist whose G1 refines faces along two edges (``test_g1``'s
     ``..._refined_along_the_edges_its_nets_cannot_close``): classification, refinement to the tolerance, G1
     with its refinement trial; every surface, curve, node error, report figure and G1 decision the same in two
@@ -55,8 +59,20 @@ def test_a_morph_in_two_threads_is_the_morph_in_one(block_shape, block_nodes):
     from hot2cold.settings import Settings
     from hot2cold.testing.synthetic import UntwistField
 
+    import hot2cold.core.threads as threads
+
     data = (block_nodes, UntwistField.over(block_nodes, 0.05, 1e-4)(block_nodes))
-    one, two = (morph(block_shape, data, Settings(threads=n)) for n in (1, 2))
+    one = morph(block_shape, data, Settings(threads=1))
+    seen = set()
+    run = threads.ThreadPoolExecutor.submit
+
+    def submit(pool, fn, *args):                                      # which threads the work ran in
+        return run(pool, lambda *a: (seen.add(threading.get_ident()), fn(*a))[1], *args)
+
+    monkeypatch.setattr(threads, "LARGE", 0)           # the block's faces (about 700 nodes) in threads too
+    monkeypatch.setattr(threads.ThreadPoolExecutor, "submit", submit)
+    two = morph(block_shape, data, Settings(threads=2))
+    assert len(seen) >= 2
     for a, b in zip(one.faces, two.faces):
         assert np.array_equal(a.surface.poles, b.surface.poles) and a.rank == b.rank
     for a, b in zip(one.edges, two.edges):

@@ -234,6 +234,10 @@ class Classification:
         """Indices of the nodes of ``role`` owned by face, edge or vertex ``index``."""
         return np.flatnonzero((self.role == role) & (self.owner == index))
 
+    def counts(self, role: Role, owners: int) -> np.ndarray:
+        """How many nodes of ``role`` each of ``owners`` faces, edges or vertices owns ``(owners,)``."""
+        return np.bincount(self.owner[self.role == role], minlength=owners)
+
     def groups(self, role: Role) -> list[tuple[int, np.ndarray]]:
         """``(index, nodes)`` for every face, edge or vertex that owns nodes of ``role``, in index order
         (one sort of all nodes instead of a scan per owner)."""

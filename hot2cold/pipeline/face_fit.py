@@ -348,7 +348,7 @@ def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_
                 progress(done[0], len(part.faces))
         return morph
 
-    nodes = np.bincount(cls.owner[cls.role == Role.FACE], minlength=len(part.faces))
+    nodes = cls.counts(Role.FACE, len(part.faces))
     out = map_threads(fit, part.faces, settings.threads, cost=nodes[[face.index for face in part.faces]])
     log.info("morphed %d faces", len(out))
     return out

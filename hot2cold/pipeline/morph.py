@@ -274,17 +274,16 @@ class MorphContext:
         """:meth:`fit_face` of each of ``faces`` (indices into ``part.faces``), with the ``turns`` given per
         face, in up to ``settings.threads`` threads."""
         turns = [None] * len(faces) if turns is None else turns
+        nodes = self.classification.counts(Role.FACE, len(part.faces))
         return map_threads(lambda job: self.fit_face(part, part.faces[job[0]], edge_morphs, job[1]),
-                           list(zip(faces, turns)), self.settings.threads,
-                           cost=[part.faces[k].surface.poles.size for k in faces])
+                           list(zip(faces, turns)), self.settings.threads, cost=nodes[faces])
 
     def _all_moved_off(self, changes: dict[int, tuple[BSplineSurface, BSplineSurface]], grids: list[FaceGrid],
                        share: float | None = None) -> dict[int, str]:
         """:meth:`_moved_off` of each face ``k: (before, after)`` of ``changes`` (in up to ``settings.threads``
         threads): the faces that may not take ``after``, and why."""
         faces = list(changes)
-        cls = self.classification
-        nodes = np.bincount(cls.owner[cls.role == Role.FACE], minlength=len(self.part.faces))
+        nodes = self.classification.counts(Role.FACE, len(self.part.faces))
         why = map_threads(lambda k: self._moved_off(k, *changes[k], grids[k], share), faces, self.settings.threads,
                           cost=[len(grids[k].uv) + nodes[k] for k in faces])
         return {k: text for k, text in zip(faces, why) if text}
@@ -741,7 +740,8 @@ def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[F
         if not misses:
             break
         patch = refine_patches(ctx.part, face_morphs, edge_morphs, misses, shortest, ctx.fit_face,
-                               ctx.refit_edges, lambda part, faces: regrid(part, faces, False), ctx.settings.threads)
+                               ctx.refit_edges, lambda part, faces: regrid(part, faces, slack=False),
+                               ctx.settings.threads, ctx.classification.counts(Role.FACE, len(ctx.part.faces)))
         if patch is None:
             log.info("G1: %d edges above %g deg; no patch of their faces may be halved", len(over),
                      _KINK_PROMISE_DEG)

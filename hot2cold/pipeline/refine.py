@@ -622,9 +622,11 @@ class _Refitted:
 
 
 def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph], fit_face: FitFace,
-           fit_edges: FitEdges, regrid: Regrid, gridded: set[int] | None = None, threads: int = 1) -> _Refitted:
+           fit_edges: FitEdges, regrid: Regrid, gridded: set[int] | None = None, threads: int = 1,
+           nodes: np.ndarray | None = None) -> _Refitted:
     """The refined edges fitted again, then the refined faces and every face on an edge that moved (in up to
-    ``threads`` threads); the grids of the refined faces (of those in ``gridded`` only, where given)."""
+    ``threads`` threads, for faces of ``nodes`` ``(n_faces,)`` nodes); the grids of the refined faces (of
+    those in ``gridded`` only, where given)."""
     part = inserted.part
     changed = sorted(inserted.faces if gridded is None else inserted.faces & gridded)
     grids = dict(zip(changed, regrid(part, changed))) if changed else {}
@@ -634,7 +636,7 @@ def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[
     faces = list(face_morphs)
     order = sorted(refit)
     for k, morph in zip(order, map_threads(lambda k: fit_face(part, part.faces[k], fitted), order, threads,
-                                           cost=[part.faces[k].surface.poles.size for k in order])):
+                                           cost=None if nodes is None else nodes[order])):
         faces[k] = morph
     return _Refitted(faces, list(fitted), grids, refit, moved)
 
@@ -667,12 +669,14 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     edge_rounds = np.zeros(len(part.edges), int)
     grids: dict[int, FaceGrid] = {}
 
+    sizes = cls.counts(Role.FACE, len(part.faces))             # each face's nodes: its work's cost, for threads
+
     def face_errors(k: int) -> FaceErrors:
         return _face_errors(part.faces[k], face_morphs[k], cls, field, targets.grids[k], edge_morphs, part.edges,
                             limit)
 
     def errors():
-        return (map_threads(face_errors, range(len(part.faces)), threads),
+        return (map_threads(face_errors, range(len(part.faces)), threads, cost=sizes),
                 [_edge_errors(e, m, cls, field, g) for e, m, g in zip(part.edges, edge_morphs, targets.edge_grids)])
 
     def worst(err):
@@ -730,7 +734,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         edge_added += inserted.edge_added
         # only the faces measured on their grids need them each round (the caller grids the others once their
         # knots are final)
-        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured, threads)
+        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured, threads, sizes)
         grids.update(refitted.grids)
         targets = targets.with_grids(refitted.grids)
         face_morphs, edge_morphs = refitted.faces, refitted.edges
@@ -739,7 +743,7 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         refit, moved = refitted.refit, refitted.moved
         rounds += 1
         # the others' errors stand: a face's depend on it and its edges only
-        for k, err in zip(sorted(refit), map_threads(face_errors, sorted(refit), threads)):
+        for k, err in zip(sorted(refit), map_threads(face_errors, sorted(refit), threads, cost=sizes[sorted(refit)])):
             face_err[k] = err
         for e in moved:
             edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
@@ -750,7 +754,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
     face_reports = []
     reported = [k for k in range(len(part.faces)) if max(face_before[k]) > limit or face_rounds[k]]
     residual = dict(zip(reported, map_threads(
-        lambda k: worst(node_residuals(part.faces[k], face_morphs[k], cls, field)), reported, threads)))
+        lambda k: worst(node_residuals(part.faces[k], face_morphs[k], cls, field)), reported, threads,
+        cost=sizes[reported])))
     for k in reported:
         face, hot = part.faces[k], hot_faces[k]
         missed = max(face_before[k]) > limit
@@ -790,12 +795,13 @@ class PatchRefinement:
 
 def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph],
                    points: dict[int, np.ndarray], shortest: np.ndarray, fit_face: FitFace, fit_edges: FitEdges,
-                   regrid: Regrid, threads: int = 1) -> PatchRefinement | None:
+                   regrid: Regrid, threads: int = 1, nodes: np.ndarray | None = None) -> PatchRefinement | None:
     """The knot-span patches of each face ``k`` that hold one of ``points[k]`` ((m, 2) parameters) halved as
     :func:`refine` halves a patch that misses the tolerance (longest-edge bisection, halves at least
     ``shortest[k]`` mm long, a direction below :data:`REFINED_DEGREE` raised to it), in their parameter
     classes so that shared edges stay shared, and the morphs fitted again (``fit_face``, ``fit_edges``,
-    ``regrid``, ``threads`` as for :func:`refine`).  None where no such patch may be halved."""
+    ``regrid``, ``threads`` as for :func:`refine`; ``nodes`` ``(n_faces,)``, each face's nodes, the cost of its
+    refit).  None where no such patch may be halved."""
     classes = _classes(part, face_morphs)
     marks: dict = {}
     elevate: set = set()
@@ -806,6 +812,6 @@ def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[E
     inserted = _insert(part, classes, marks, elevate)
     if not inserted.faces and not inserted.edges:
         return None
-    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, threads=threads)
+    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, threads=threads, nodes=nodes)
     return PatchRefinement(inserted.part, refitted.faces, refitted.edges, refitted.grids,
                            {k: tuple(int(n) for n in inserted.face_added[k]) for k in sorted(inserted.faces)})
