@@ -99,9 +99,10 @@ class Settings:
         one thread around its morph.
     threads : int
         Threads the morph's work per face may run in (foot points, grids, fits; the kernel's calls still run one
-        at a time): the results are the same for any count.  The ``hot2cold morph`` command takes the
-        process's cores; a batch runs one job per core, each in one thread; 1 (the default) for a morph called
-        from Python, which may have other work for the cores.
+        at a time), where two faces have ``hot2cold.core.threads.LARGE`` nodes or more (smaller faces' work is
+        mostly Python's own, which runs one thread at a time): the results are the same for any count.  The
+        ``hot2cold morph`` command takes the process's cores; a batch runs one job per core, each in one
+        thread; 1 (the default) for a morph called from Python, which may have other work for the cores.
     extrapolate : bool
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the

@@ -31,9 +31,8 @@ def map_threads(fn: Callable[[T], R], items: Iterable[T], threads: int,
 
     ``cost``: a guess of each item's work in nodes (or points); the items run in threads only where two of
     them reach ``large`` (default :data:`LARGE`; no ``cost``: always), the costliest started first, so that
-    one large face does not come
-    last and run alone.  An exception of ``fn`` is raised here, that of the first item in ``items``' order
-    that raised, once every item started has ended."""
+    one large face does not come last and run alone.  An exception of ``fn`` is raised here, that of the
+    first item in ``items``' order that raised, once every item started has ended."""
     items = list(items)
     if cost is not None and np.count_nonzero(np.asarray(cost, float) >= (LARGE if large is None else large)) < 2:
         threads = 1
