@@ -561,9 +561,8 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         return FaceGrid(uv, hot, expected, slack, near, node_distance, support)
 
     chosen = part.faces if faces is None else [part.faces[k] for k in faces]
-    for face in chosen:                 # each face's nodes found here, the threads only read them
-        face_nodes.of(part, face)
-    return map_threads(grid, chosen, threads, cost=[len(face_nodes.of(part, f).nodes) for f in chosen])
+    mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
+    return map_threads(grid, chosen, threads, cost=[len(m.nodes) for m in mine])
 
 
 def with_slack(part: Part, grids: list[FaceGrid], face_nodes: FaceNodes, threads: int = 1) -> list[FaceGrid]:

@@ -743,7 +743,8 @@ def refine(part: Part, cls: Classification, field: DisplacementField, face_morph
         refit, moved = refitted.refit, refitted.moved
         rounds += 1
         # the others' errors stand: a face's depend on it and its edges only
-        for k, err in zip(sorted(refit), map_threads(face_errors, sorted(refit), threads, cost=sizes[sorted(refit)])):
+        again = sorted(refit)
+        for k, err in zip(again, map_threads(face_errors, again, threads, cost=sizes[again])):
             face_err[k] = err
         for e in moved:
             edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
