@@ -35,7 +35,7 @@ def block():
 
 def test_parts_are_the_corpus_and_the_samples(bench):
     names = [p.name for p in bench.parts()]
-    assert len(names) == 17 + len(list((ROOT / "sample_parts").glob("*.step")))
+    assert len(names) == 19 + len(list((ROOT / "sample_parts").glob("*.step")))
     assert "simple_boat.step" in names and "filleted_block.step" in names
     assert [p.name for p in bench.select(bench.parts(), "boat,HANDLE")] == ["Handle_SO101.step", "simple_boat.step"]
 

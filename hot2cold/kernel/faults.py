@@ -109,6 +109,28 @@ def _statuses(analyzer: BRepCheck_Analyzer, shape, context) -> list[str]:
     return [s.name.removeprefix("BRepCheck_") for s in found if s != BRepCheck_NoError]
 
 
+def _face_statuses(face) -> tuple[str, ...] | None:
+    """The BRepCheck statuses of ``face`` alone, of its wires, edges and vertices on it (each once, in that
+    order); None when the face is valid."""
+    local = BRepCheck_Analyzer(face)
+    if local.IsValid():
+        return None
+    found = _statuses(local, face, None)
+    for kind in (TopAbs_WIRE, TopAbs_EDGE, TopAbs_VERTEX):
+        explorer = TopExp_Explorer(face, kind)
+        while explorer.More():
+            found += _statuses(local, explorer.Current(), face)
+            explorer.Next()
+    return tuple(dict.fromkeys(found))
+
+
+def face_faults(face) -> str:
+    """What ``BRepCheck_Analyzer`` finds wrong with ``face`` alone, as "NotClosed, UnorientableShape" (at most
+    a few statuses); empty when it is valid."""
+    found = _face_statuses(face) or ()
+    return ", ".join(found[:_STATUSES]) + (", ..." if len(found) > _STATUSES else "")
+
+
 def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
     """The faults of ``solid`` (valid: none): each face of ``faces`` (pairs of the number to report and the
     face, for the solid's faces) that ``BRepCheck_Analyzer`` refuses, or the solid's own when none is."""
@@ -119,16 +141,9 @@ def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
         return []
     out = []
     for k, face in faces:
-        local = BRepCheck_Analyzer(face)
-        if local.IsValid():
-            continue
-        found = _statuses(local, face, None)
-        for kind in (TopAbs_WIRE, TopAbs_EDGE, TopAbs_VERTEX):
-            explorer = TopExp_Explorer(face, kind)
-            while explorer.More():
-                found += _statuses(local, explorer.Current(), face)
-                explorer.Next()
-        out.append(Fault(k, describe_face(face, k), tuple(dict.fromkeys(found))))
+        found = _face_statuses(face)
+        if found is not None:
+            out.append(Fault(k, describe_face(face, k), found))
     if out:
         return out
     shells = shape_map(solid, TopAbs_SHELL)

@@ -34,7 +34,8 @@ from OCP.gp import gp_Vec2d
 from ..errors import InputError, KernelError
 from ..core.model import Edge, EdgeUse, Face, Part
 from .convert import curve_to_record, surface_to_record
-from .faults import describe_face, face_label, solid_faults
+from .faults import describe_face, face_faults, face_label, solid_faults
+from .repair import face_valid, mend_face
 
 log = logging.getLogger(__name__)
 
@@ -150,11 +151,14 @@ def _convert(shape: TopoDS_Shape) -> TopoDS_Shape:
     except Exception as exc:  # Standard_Failure
         failure = exc
     else:
-        for face in shape_map(shape, TopAbs_FACE):
+        size = diagonal(shape)
+        faces = shape_map(shape, TopAbs_FACE)
+        for k, face in enumerate(faces):
             surface = BRep_Tool.Surface_s(face)
             if surface.DynamicType().Name() == "Geom_OffsetSurface":
-                _tighten_offset(surface, TopoDS.Face_s(converter.ModifiedShape(face)),
-                                _OFFSET_TOLERANCE * diagonal(shape))
+                _tighten_offset(surface, TopoDS.Face_s(converter.ModifiedShape(face)), _OFFSET_TOLERANCE * size)
+        for k, (face, converted_face) in enumerate(zip(faces, shape_map(converted, TopAbs_FACE))):
+            _mend(face, converted_face, k, _MEND_TOLERANCE * size)
         return converted
     faces = index_map(shape, TopAbs_FACE)
     for s, solid in enumerate(shape_map(shape, TopAbs_SOLID)):
@@ -165,6 +169,23 @@ def _convert(shape: TopoDS_Shape) -> TopoDS_Shape:
                 raise KernelError(f"B-spline conversion of solid {s} failed at "
                                   f"{describe_face(face, faces.FindIndex(face) - 1)}: {exc}") from exc
     raise KernelError(f"B-spline conversion of the part failed (on no face alone): {failure}") from failure
+
+
+#: The largest edge tolerance (share of the part's diagonal) that mending a converted face may give an edge.
+_MEND_TOLERANCE = 1e-7
+
+
+def _mend(face, converted_face, index: int, bound: float) -> None:
+    """Mend, in place, ``converted_face`` (the conversion of ``face``, numbered ``index``) where it is invalid
+    and ``face`` as read is valid (:func:`hot2cold.kernel.repair.mend_face`); a face that stays invalid raises
+    :class:`KernelError` naming it, its surface type as read, a point on it and what BRepCheck says."""
+    if face_valid(converted_face) or not face_valid(face):
+        return
+    failed = mend_face(converted_face, bound)
+    if failed:
+        faults = face_faults(converted_face)
+        raise KernelError(f"B-spline conversion broke {describe_face(face, index)}: {faults or 'invalid'} "
+                          f"({failed})")
 
 
 #: Offset surfaces are approximated to this share of the part's diagonal.  ``BRepBuilderAPI_NurbsConvert``
