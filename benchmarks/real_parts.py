@@ -4,10 +4,12 @@ cold geometry.
 Run from the repository::
 
     python benchmarks/real_parts.py                              # everything (corpus + sample_parts)
+    python benchmarks/real_parts.py --quick --nodes fe           # the quick subset, for every change
     python benchmarks/real_parts.py --parts boat,handle --fields affine --nodes fe --timeout 120
     python benchmarks/real_parts.py --json out/real_parts.json
 
-Parts: ``corpus/real_parts/*`` (see ``corpus/README.md``) and the bundled ``sample_parts/*.step``.  For each
+Parts: the corpus of ``corpus/manifest.json`` that is present here (``python benchmarks/corpus.py fetch`` brings
+the files that are not committed; see ``corpus/README.md``) and the bundled ``sample_parts/*.step``.  For each
 (part, node set, field), in a fresh process (so a crash, a hang or a memory blow-up of one run stops none of
 the others, and its peak memory is its own):
 
@@ -52,6 +54,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))     # the corpus module beside this one
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT / "corpus" / "real_parts"
@@ -126,11 +130,13 @@ class Run:
 
 # ------------------------------------------------------------------------------------------------- the parts
 
-def parts(root: Path = ROOT) -> list[Path]:
-    """The corpus files and the bundled sample parts, sorted by name within each."""
-    corpus = sorted(p for p in (root / "corpus" / "real_parts").iterdir()
-                    if p.suffix.lower() in (".step", ".stp"))
-    return corpus + sorted((root / "sample_parts").glob("*.step"))
+def parts(quick: bool = False) -> list[Path]:
+    """The corpus parts present here (``corpus/manifest.json`` through :func:`corpus.corpus_parts`; the quick
+    subset with ``quick``), then, for the whole corpus, the bundled sample parts."""
+    from corpus import corpus_parts
+
+    found = corpus_parts(quick=quick)
+    return found if quick else found + sorted((ROOT / "sample_parts").glob("*.step"))
 
 
 def cad_system(path: Path) -> str:
@@ -154,7 +160,7 @@ def solid_faces(shape) -> list:
     from OCP.TopAbs import TopAbs_SOLID
 
     from hot2cold.kernel.sampling import face_list
-    from hot2cold.kernel.topology import shape_map
+    from hot2cold.kernel.explore import shape_map
 
     return [f for solid in shape_map(shape, TopAbs_SOLID) for f in face_list(solid)]
 
@@ -185,7 +191,7 @@ def node_set(shape, kind: str, spacing: float) -> np.ndarray:
         return fe_surface_nodes(shape, spacing, seed=SEED)[0]
     if kind == "tess":
         from hot2cold.kernel.tessellate import tessellate
-        from hot2cold.kernel.topology import diagonal
+        from hot2cold.kernel.explore import diagonal
 
         def vertices(deflection):
             return np.unique(np.round(tessellate(shape, deflection).vertices, 9), axis=0)
@@ -259,7 +265,7 @@ def face_errors(hot, cold, exact_map, spacing: float) -> list[np.ndarray]:
     from hot2cold.kernel.convert import surface_to_record
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.sampling import face_samples
-    from hot2cold.kernel.topology import bspline_surface
+    from hot2cold.kernel.explore import bspline_surface
 
     hot_faces, cold_faces = solid_faces(hot), solid_faces(cold)
     if len(hot_faces) != len(cold_faces):
@@ -299,7 +305,7 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     options ``morph_args``), checks."""
     from hot2cold.cli import main as cli_main
     from hot2cold.kernel.step import read_step
-    from hot2cold.kernel.topology import diagonal
+    from hot2cold.kernel.explore import diagonal
     from hot2cold.kernel.validity import check_solids, face_areas
 
     run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
@@ -450,8 +456,49 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
                      _num(None if r.g2_max is None else 100 * r.g2_max, ".2g")))
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
-    lines.append("")
-    lines.append(summary(runs))
+    lines += ["", by_kind(runs), "", summary(runs)]
+    return "\n".join(lines)
+
+
+#: Failure kinds of a run, in the order the scoreboard lists them: (kind, test on a run).
+KINDS = (
+    ("morphed", lambda r: r.ok),
+    ("refused: broken as given", lambda r: r.exit_code == 2 and ("is not valid" in r.message
+                                                                 or "is not closed" in r.message)),
+    ("refused: other input error", lambda r: r.exit_code == 2),
+    ("B-spline conversion", lambda r: r.exit_code == 3 and "conversion" in r.message),
+    ("other kernel failure", lambda r: r.exit_code == 3),
+    ("cold part invalid (exit 4)", lambda r: r.exit_code == 4),
+    ("written but invalid, open or faces lost on read-back", lambda r: r.exit_code in WRITTEN),
+    ("timeout", lambda r: r.message.startswith("timeout")),
+    ("killed (memory, signal)", lambda r: r.exit_code is None),
+    ("other", lambda r: True),
+)
+
+
+def failure_kind(run: Run) -> str:
+    """The first of :data:`KINDS` that ``run`` is."""
+    return next(kind for kind, test in KINDS if test(run))
+
+
+def by_kind(runs: list[Run]) -> str:
+    """The runs counted by failure kind and field, each kind with its parts; then the CAD systems covered."""
+    fields = sorted({r.field for r in runs})
+    lines = ["| kind | " + " | ".join(fields) + " | parts |", "|---|" + "---|" * len(fields) + "---|"]
+    for kind, _ in KINDS:
+        these = [r for r in runs if failure_kind(r) == kind]
+        if not these:
+            continue
+        names = "" if kind == "morphed" else ", ".join(sorted({r.part for r in these}))
+        counts = " | ".join(str(sum(r.field == f for r in these)) for f in fields)
+        lines.append(f"| {kind} | {counts} | {names} |")
+    systems: dict = {}
+    for r in runs:
+        systems.setdefault(r.cad or "?", set()).add(r.part)
+    lines += ["", "CAD systems: " + ", ".join(f"{cad} ({len(p)})" for cad, p in sorted(systems.items()))]
+    peak = max((r for r in runs if r.peak_mb is not None), key=lambda r: r.peak_mb, default=None)
+    if peak is not None:
+        lines.append(f"largest peak memory: {peak.peak_mb:.0f} MB ({peak.part}, {peak.field})")
     return "\n".join(lines)
 
 
@@ -497,6 +544,8 @@ def run_arguments(parser: argparse.ArgumentParser, timeout: float) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", help="comma-separated parts of file names (default: all)")
+    parser.add_argument("--quick", action="store_true",
+                        help="the corpus's quick subset (about 15 parts) instead of the whole corpus")
     parser.add_argument("--fields", default=",".join(FIELDS), help=f"comma-separated, of {FIELDS}")
     parser.add_argument("--nodes", default=",".join(NODES), help=f"comma-separated node sets, of {NODES}")
     run_arguments(parser, 600.0)
@@ -520,7 +569,7 @@ def main(argv=None) -> int:
         args.json.write_text(json.dumps(asdict(run)))
         return 0
 
-    paths = select(parts(), args.parts)
+    paths = select(parts(quick=args.quick), args.parts)
     if not paths:
         parser.error(f"no part matches {args.parts!r}")
     runs = []

@@ -39,7 +39,7 @@ from OCP.TopAbs import TopAbs_FACE, TopAbs_VERTEX
 from OCP.TopoDS import TopoDS, TopoDS_Solid
 
 from hot2cold.kernel.validity import check_solids
-from hot2cold.kernel.topology import shape_map
+from hot2cold.kernel.explore import shape_map
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))

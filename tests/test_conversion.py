@@ -70,6 +70,63 @@ def _shifted(shape: cq.Shape, kind: str, by: float) -> cq.Shape:
     return copy
 
 
+def _turned(shape: cq.Shape, kind: str, by: float) -> cq.Shape:
+    """A copy of ``shape`` whose faces on surfaces of type ``kind`` (cylinder, cone, sphere, torus) lie on the
+    same surface with its frame turned back by ``by`` about its axis, their u parameters moved by ``by``: the
+    same faces, as CAD systems write a face over u pi to 3 pi or -pi to pi (across the seam of the turn)."""
+    from OCP.gp import gp_Ax3, gp_Dir
+    from OCP.TopLoc import TopLoc_Location
+
+    copy = cq.Shape.cast(BRepBuilderAPI_Copy(shape.wrapped, True, False).Shape())
+    builder = BRep_Builder()
+    for face in copy.Faces():
+        if face.geomType() != kind:
+            continue
+        forward_face = TopoDS.Face_s(face.wrapped.Oriented(TopAbs_FORWARD))
+        location = TopLoc_Location()
+        surface = BRep_Tool.Surface_s(forward_face, location)
+        frame = surface.Position()
+        x, y = frame.XDirection(), frame.YDirection()
+        c, s = math.cos(-by), math.sin(-by)
+        turned = gp_Ax3(frame.Location(), frame.Direction(),
+                        gp_Dir(c * x.X() + s * y.X(), c * x.Y() + s * y.Y(), c * x.Z() + s * y.Z()))
+        if not frame.Direct():
+            turned.YReverse()
+        new = surface.Copy()
+        new.SetPosition(turned)
+        seen, moved = TopTools_IndexedMapOfShape(), []
+        explorer = TopExp_Explorer(forward_face, TopAbs_EDGE)
+        while explorer.More():
+            edge = TopoDS.Edge_s(explorer.Current())
+            explorer.Next()
+            if seen.Contains(edge):
+                continue
+            seen.Add(edge)
+            forward = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
+            uses = [forward] + ([TopoDS.Edge_s(edge.Oriented(TopAbs_REVERSED))]
+                                if BRep_Tool.IsClosed_s(edge, forward_face) else [])
+            curves = [BRep_Tool.CurveOnSurface_s(u, forward_face, 0.0, 0.0).Copy() for u in uses]
+            for curve in curves:
+                curve.Translate(gp_Vec2d(by, 0.0))
+            moved.append((forward, curves, BRep_Tool.Tolerance_s(edge)))
+        builder.UpdateFace(forward_face, new, location, BRep_Tool.Tolerance_s(forward_face))
+        for forward, curves, tol in moved:
+            builder.UpdateEdge(forward, *curves, forward_face, tol)
+    return copy
+
+
+def _across_the_seam():
+    """A drilled bar whose cylinders run over u pi to 3 pi and whose drill-point cone over -pi to pi (as
+    Autodesk exports wrote them: NurbsConvert left such faces open in their parameter plane)."""
+    body = cq.Solid.makeCylinder(5, 20).fuse(cq.Solid.makeCone(0, 5, 4, pnt=cq.Vector(0, 0, -4))).clean()
+    return _turned(_turned(body, "CYLINDER", math.pi), "CONE", -math.pi)
+
+
+def _sphere_across_the_seam():
+    """A ball whose face runs over u -pi/2 to 3 pi/2."""
+    return _turned(cq.Solid.makeSphere(6, angleDegrees1=-90, angleDegrees2=90), "SPHERE", -math.pi / 2)
+
+
 def _drill():
     """A cylinder with a drill-point cone (apex as a degenerated edge), its faces in half turns."""
     body = cq.Solid.makeCylinder(5, 20).fuse(cq.Solid.makeCone(0, 5, 4, pnt=cq.Vector(0, 0, -4))).clean()
@@ -106,7 +163,8 @@ def _offset():
 
 
 PARTS = {"drill point": _drill, "sphere": _sphere, "torus beyond 2 pi": _torus, "revolved B-spline": _revolved,
-         "extruded B-spline": _extruded, "offset": _offset}
+         "extruded B-spline": _extruded, "offset": _offset, "across the seam": _across_the_seam,
+         "sphere across the seam": _sphere_across_the_seam}
 
 
 @pytest.mark.parametrize("name", list(PARTS))
@@ -125,6 +183,39 @@ def test_a_torus_beyond_2_pi_keeps_its_parameters_outside_the_first_period_in_th
     face = next(f for f in _torus().Faces() if f.geomType() == "TORUS")
     u0, u1, _, _ = BRepTools.UVBounds_s(face.wrapped)
     assert u0 >= TWO_PI - 1e-9 and u1 <= 2 * TWO_PI + 1e-9
+
+
+@pytest.mark.parametrize("make, kinds", [(_across_the_seam, ("CYLINDER", "CONE")),
+                                         (_sphere_across_the_seam, ("SPHERE",))])
+def test_the_parts_across_the_seam_are_valid_and_cross_it(make, kinds):
+    """The test parts are what they claim: valid, each face of those kinds beyond 0 to 2 pi in u, where it was
+    inside before the turn."""
+    shape = make()
+    assert BRepCheck_Analyzer(shape.wrapped).IsValid()
+    faces = [f for f in shape.Faces() if f.geomType() in kinds]
+    assert faces
+    for face in faces:
+        u0, u1, _, _ = BRepTools.UVBounds_s(face.wrapped)
+        assert u0 < -1e-3 or u1 > TWO_PI + 1e-3
+
+
+def test_conversion_leaves_the_part_as_read_unchanged():
+    """The conversion shares B-spline geometry with its input, and the normalisation makes periodic surfaces
+    non-periodic in place: it must work on a copy (an NX plate was refused as invalid at a point 1e6 x outside
+    it, the check having run on the changed input)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from hot2cold.kernel.explore import shape_map
+    from hot2cold.kernel.topology import decompose
+    from OCP.TopAbs import TopAbs_FACE
+
+    shape = BRepBuilderAPI_NurbsConvert(cq.Solid.makeCylinder(5, 20).wrapped, True).Shape()
+    surfaces = [BRep_Tool.Surface_s(f) for f in shape_map(shape, TopAbs_FACE)]
+    before = [(s.IsUPeriodic(), s.NbUPoles(), s.Bounds()) for s in surfaces]
+    assert before[0][0], "the test part must have a periodic B-spline face"
+    part = decompose(shape)
+    assert [(s.IsUPeriodic(), s.NbUPoles(), s.Bounds()) for s in surfaces] == before
+    assert BRepCheck_Analyzer(shape).IsValid()
+    assert not BRep_Tool.Surface_s(part.kernel.hot_faces[0]).IsUPeriodic()
 
 
 @pytest.mark.parametrize("name", list(PARTS))
@@ -156,3 +247,36 @@ def test_a_broken_solid_is_refused_naming_its_face():
     nodes = fe_surface_nodes(box.wrapped, 1.0, seed=1)[0]
     with pytest.raises(InputError, match=r"hot solid 0 is not valid: face \d+ \(Plane, near \(.*\) mm\): \w+"):
         morph(broken, (nodes, np.zeros_like(nodes)))
+
+
+@pytest.mark.parametrize("make", [_across_the_seam, _sphere_across_the_seam])
+def test_a_face_across_the_seam_is_turned_to_begin_at_0_and_stays_where_it_is(make):
+    """``_turn_to_face`` gives a face that runs outside 0 to 2 pi the same surface turned about its axis: its u
+    then starts at 0, the face stays valid, and every point of every pcurve lies where it lay."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from hot2cold.kernel.conversion import _turn_to_face
+
+    shape = make()
+    for k, face in enumerate(shape.Faces()):
+        if face.geomType() == "PLANE":
+            continue
+        f = face.wrapped
+
+        def points():
+            surface, out = BRepAdaptor_Surface(f), []
+            explorer = TopExp_Explorer(f, TopAbs_EDGE)
+            while explorer.More():
+                edge = TopoDS.Edge_s(explorer.Current())
+                explorer.Next()
+                first, last = BRep_Tool.Range_s(edge, f)
+                curve = BRep_Tool.CurveOnSurface_s(edge, f, 0.0, 0.0)
+                for t in np.linspace(first, last, 7):
+                    p = surface.Value(curve.Value(t).X(), curve.Value(t).Y())
+                    out.append((p.X(), p.Y(), p.Z()))
+            return np.array(out)
+
+        before = points()
+        _turn_to_face(f, k)
+        assert BRepCheck_Analyzer(f).IsValid()
+        assert BRepTools.UVBounds_s(f)[0] == pytest.approx(0.0, abs=1e-12)
+        np.testing.assert_allclose(points(), before, rtol=0, atol=1e-9)

@@ -21,7 +21,8 @@ from OCP.TopAbs import TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLI
 from OCP.TopoDS import TopoDS
 
 from hot2cold.errors import KernelError
-from hot2cold.kernel import repair, topology
+from hot2cold.kernel import conversion, repair, topology
+from hot2cold.kernel.explore import shape_map
 from hot2cold.kernel.faults import face_faults
 from hot2cold.kernel.step import read_step
 
@@ -29,7 +30,7 @@ CORPUS = Path(__file__).resolve().parents[1] / "corpus" / "real_parts"
 
 
 def _converted_faces(shape):
-    return topology.shape_map(BRepBuilderAPI_NurbsConvert(shape, True).Shape(), TopAbs_FACE)
+    return shape_map(BRepBuilderAPI_NurbsConvert(shape, True).Shape(), TopAbs_FACE)
 
 
 def _gaps(face) -> list[float]:
@@ -41,8 +42,11 @@ def _gaps(face) -> list[float]:
 def _shift_end(face, use, which: int, by) -> None:
     """Move end ``which`` (0 start, 1 end, along the use) of the oriented edge ``use``'s pcurve by ``by``."""
     forward = TopoDS.Edge_s(use.Oriented(TopAbs_FORWARD))
-    orientation = use.Orientation() if BRep_Tool.IsClosed_s(forward, face) else TopAbs_FORWARD
     along = 1 - which if use.Orientation() == TopAbs_REVERSED else which
+    # BRep_Tool reads a reversed face's pcurves as its forward face's with the edge reversed
+    in_forward_face = use if face.Orientation() == TopAbs_FORWARD else TopoDS.Edge_s(use.Reversed())
+    face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
+    orientation = in_forward_face.Orientation() if BRep_Tool.IsClosed_s(forward, face) else TopAbs_FORWARD
     spline = repair._pcurve(TopoDS.Edge_s(forward.Oriented(orientation)), face)
     k = 1 if along == 0 else spline.NbPoles()
     p = spline.Pole(k)
@@ -108,9 +112,10 @@ def test_a_gap_on_a_seam_moves_that_seam_side_only():
 
 def test_a_face_that_stays_broken_is_named(monkeypatch):
     path = CORPUS / "nist_ctc_01_asme1_ap242-e1.stp"
-    monkeypatch.setattr(topology, "mend_face", lambda face, bound: "nothing tried")
+    monkeypatch.setattr(conversion, "mend_face", lambda face, bound: "nothing tried")
+    monkeypatch.setattr(conversion, "fix_faces", lambda shape, faces, bound: shape)
     with pytest.raises(KernelError, match=r"B-spline conversion broke face 56 \(Cone, near .* mm\): "
-                                          r".*NotClosed.*\(nothing tried\)"):
+                                          r".*NotClosed.*, mended or not"):
         topology.decompose(read_step(path))
 
 
@@ -122,6 +127,25 @@ def test_the_nist_parts_the_conversion_broke_convert_to_valid_solids(name, broke
     assert [k for k, f in enumerate(raw) if not repair.face_valid(f)] == broken, "NurbsConvert itself is fixed?"
     assert all(face_faults(raw[k]) for k in broken)
     part = topology.decompose(shape)
-    solids = topology.shape_map(part.kernel.hot, TopAbs_SOLID)
+    solids = shape_map(part.kernel.hot, TopAbs_SOLID)
     assert solids and all(topology.solid_fault(part.kernel.hot, s) is None for s in range(len(solids)))
     assert len(part.faces) == len(raw)
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_seam_gap_on_a_reversed_face_moves_the_pcurve_of_that_use(reverse):
+    """A face reversed in its shell stores its seam's pcurves as the forward face does: the mend must move
+    the pcurve of the use that is off, not its twin."""
+    cylinder = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(1, 2, 3), gp_Dir(0, 0.6, 0.8)), 4.0, 9.0).Shape()
+    face = next(f for f in _converted_faces(cylinder)
+                if any(BRep_Tool.IsClosed_s(a, f) for a, _ in repair._junctions(f)))
+    face = TopoDS.Face_s(face.Reversed()) if reverse else face
+    seam = next(a for a, _ in repair._junctions(face) if BRep_Tool.IsClosed_s(a, face))
+    twin = TopoDS.Edge_s(seam.Reversed())
+    twin_ends = [e.copy() for e in repair._ends(twin, face)]
+    seam_start = repair._ends(seam, face)[0].copy()
+    _shift_end(face, seam, 1, (2e-4, 1e-4))
+    assert repair.mend_face(face, 1e-6) is None and repair.face_valid(face) and max(_gaps(face)) == 0
+    np.testing.assert_array_equal(repair._ends(seam, face)[0], seam_start)
+    for kept, now in zip(twin_ends, repair._ends(twin, face)):
+        np.testing.assert_array_equal(now, kept)

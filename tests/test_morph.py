@@ -8,7 +8,7 @@ from hot2cold.core.bspline import evaluate_surface
 from hot2cold.core.model import Role
 from hot2cold.kernel.convert import surface_to_record
 from hot2cold.kernel.step import read_step
-from hot2cold.kernel.topology import bspline_surface
+from hot2cold.kernel.explore import bspline_surface
 from hot2cold.pipeline.morph import morph
 from hot2cold.testing.synthetic import AffineField, UntwistField, ZeroField
 

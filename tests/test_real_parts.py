@@ -33,10 +33,22 @@ def block():
     return read_step(BLOCK)
 
 
-def test_parts_are_the_corpus_and_the_samples(bench):
-    names = [p.name for p in bench.parts()]
-    assert len(names) == 19 + len(list((ROOT / "sample_parts").glob("*.step")))
-    assert "simple_boat.step" in names and "filleted_block.step" in names
+def test_parts_are_the_corpus_present_and_the_samples(bench):
+    """The benchmark runs the manifest's parts that are here (the committed ones always), then the samples;
+    ``--quick`` the manifest's quick subset."""
+    import corpus
+
+    entries = corpus.load_manifest()
+    committed = [e for e in entries if e["source"] == "repo-file"]
+    assert len(committed) == len([p for p in (ROOT / "corpus" / "real_parts").iterdir()
+                                             if p.suffix.lower() in (".step", ".stp")]) == 19
+    assert all(corpus.local_path(e).is_file() for e in committed)
+    present = [corpus.local_path(e) for e in entries if corpus.local_path(e).is_file()]
+    samples = sorted((ROOT / "sample_parts").glob("*.step"))
+    assert bench.parts() == present + samples
+    quick = bench.parts(quick=True)
+    assert quick and set(quick) <= set(present)
+    assert {p.name for p in quick} >= {"nist_ctc_01_asme1_ap242-e1.stp", "nist_ftc_06_asme1_ap242-e2.stp"}
     assert [p.name for p in bench.select(bench.parts(), "boat,HANDLE")] == ["Handle_SO101.step", "simple_boat.step"]
 
 
@@ -119,7 +131,11 @@ def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
     assert bench.load(asdict(died)) == died                         # --json, then --show
     assert bench.load(asdict(named)) == named
     board = bench.scoreboard([good, smooth, missed, silent, named, died, hung])
-    assert sum(line.startswith("| ") for line in board.splitlines()) == 8       # the head and 7 rows
+    table = board.split("\n\n")[0].splitlines()
+    assert len(table) == 9 and all(line.startswith("|") for line in table)     # the head, its rule and 7 rows
+    assert bench.failure_kind(died) == "killed (memory, signal)" and bench.failure_kind(hung) == "timeout"
+    assert "| morphed | 1 | 4 |  |" in board
+    assert f"| timeout | 1 | 0 | {hung.part} |" in board and f"| killed (memory, signal) | 1 | 0 | {died.part} |" in board
     assert "| 6, 8 |" in board
     assert board.endswith("5 of 7 morph (a cold part written, exit 0 or 5, valid on read-back, faces kept, "
                           "0 free edges; 4 exit 0); affine within 1e-08 mm on 1 of 3; smooth within 0.001 mm "

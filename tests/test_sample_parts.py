@@ -23,7 +23,8 @@ from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX
 
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
-from hot2cold.kernel.topology import decompose, shape_map
+from hot2cold.kernel.explore import shape_map
+from hot2cold.kernel.topology import decompose
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 

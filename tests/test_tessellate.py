@@ -6,7 +6,7 @@ import trimesh
 
 from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.tessellate import tessellate
-from hot2cold.kernel.topology import shape_map
+from hot2cold.kernel.explore import shape_map
 
 
 def test_blade_mesh_is_closed_outward_and_close_to_the_volume(blade_shape):

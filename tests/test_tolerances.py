@@ -76,7 +76,7 @@ def test_volume_and_areas_agree_with_a_fine_triangulation():
     mesh_volume = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
     assert volume(shape) == pytest.approx(mesh_volume, rel=1e-4)
     assert 19_600 < volume(shape) < 19_800
-    from hot2cold.kernel.topology import shape_map
+    from hot2cold.kernel.explore import shape_map
     from OCP.TopAbs import TopAbs_FACE
     areas = face_areas(shape_map(shape, TopAbs_FACE))
     assert areas.sum() == pytest.approx(0.5 * np.linalg.norm(cross, axis=1).sum(), rel=1e-4)

@@ -17,6 +17,8 @@ from OCP.BRepTools import BRepTools
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_SHELL, TopAbs_VERTEX, TopAbs_WIRE
 from OCP.TopExp import TopExp_Explorer
 
+from .explore import shape_map
+
 #: Statuses named in a message at the most.
 _STATUSES = 3
 
@@ -134,8 +136,6 @@ def face_faults(face) -> str:
 def solid_faults(solid, faces: list[tuple[int, object]]) -> list[Fault]:
     """The faults of ``solid`` (valid: none): each face of ``faces`` (pairs of the number to report and the
     face, for the solid's faces) that ``BRepCheck_Analyzer`` refuses, or the solid's own when none is."""
-    from .topology import shape_map     # topology builds on this module
-
     analyzer = BRepCheck_Analyzer(solid)
     if analyzer.IsValid():
         return []

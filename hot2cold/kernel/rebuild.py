@@ -25,7 +25,8 @@ from OCP.TopoDS import TopoDS_Shape
 from ..core.bspline import BSplineCurve, BSplineSurface
 from ..errors import KernelError
 from .convert import set_curve_poles, set_surface_poles
-from .topology import KernelPart, bspline_curve, bspline_surface, shape_map
+from .explore import bspline_curve, bspline_surface, shape_map
+from .topology import KernelPart
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ iso-line the conversion keeps exact), the other one moves; otherwise the end who
 farther from the vertex moves onto the other.  A move
 changes the curve near its end only (the end pole of a clamped B-spline), by the gap.  Where that leaves the
 face invalid, the second way makes the edges' tolerances cover their pcurves (``BRepLib.SameParameter``), up to
-a bound the caller gives.
+a bound the caller gives; :func:`fix_faces` is the last, ``ShapeFix_Face`` on the faces still broken.
 """
 from __future__ import annotations
 
@@ -28,6 +28,8 @@ from OCP.Geom2d import Geom2d_BSplineCurve, Geom2d_Line, Geom2d_TrimmedCurve
 from OCP.Geom2dConvert import Geom2dConvert
 from OCP.gp import gp_Pnt2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
+from OCP.ShapeBuild import ShapeBuild_ReShape
+from OCP.ShapeFix import ShapeFix_Face
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopoDS import TopoDS
 
@@ -124,8 +126,10 @@ def _plan(moves: list, use, which: int, target: np.ndarray, face) -> None:
     ``target``: as an end of the pcurve that use runs on (a seam has one per orientation)."""
     forward = TopoDS.Edge_s(use.Oriented(TopAbs_FORWARD))
     reversed_use = use.Orientation() == TopAbs_REVERSED
-    orientation = use.Orientation() if BRep_Tool.IsClosed_s(forward, face) else TopAbs_FORWARD
     along_curve = 1 - which if reversed_use else which
+    orientation = TopAbs_FORWARD
+    if BRep_Tool.IsClosed_s(forward, face):      # which of a seam's pcurves: as the forward face stores them
+        orientation = TopAbs_REVERSED if reversed_use != (face.Orientation() == TopAbs_REVERSED) else TopAbs_FORWARD
     for known, known_orientation, ends in moves:
         if known.IsSame(forward) and known_orientation == orientation:
             ends[along_curve] = target
@@ -134,8 +138,9 @@ def _plan(moves: list, use, which: int, target: np.ndarray, face) -> None:
 
 
 def _move_ends(forward, orientation, ends: dict, face) -> None:
-    """Move ends (0 first, 1 last) of the pcurve of ``forward`` on ``face`` run in ``orientation`` to their
-    points ``(2,)``, and store it (with the other pcurve of a seam unchanged)."""
+    """Move ends (0 first, 1 last) of the pcurve of ``forward`` on ``face`` (taken forward) run in
+    ``orientation`` to their points ``(2,)``, and store it (with the other pcurve of a seam unchanged)."""
+    face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
     use = TopoDS.Edge_s(forward.Oriented(orientation))
     spline = _pcurve(use, face)
     if spline is None:
@@ -167,6 +172,20 @@ def widen_tolerances(face, bound: float) -> bool:
         BRepLib.SameParameter_s(edge, BRep_Tool.Tolerance_s(edge), True)
         within &= BRep_Tool.Tolerance_s(edge) <= bound
     return within
+
+
+def fix_faces(shape, faces: list, bound: float):
+    """The last way: ``ShapeFix_Face`` on each of ``faces`` (faces of ``shape``), edge tolerances up to
+    ``bound`` mm; returns ``shape`` with the faces and edges it replaced in their places (the caller checks
+    that they are valid and that no face was split)."""
+    reshape = ShapeBuild_ReShape()
+    for face in faces:
+        fix = ShapeFix_Face(face)
+        fix.SetContext(reshape)
+        fix.SetPrecision(BRep_Tool.Tolerance_s(face))
+        fix.SetMaxTolerance(bound)
+        fix.Perform()
+    return reshape.Apply(shape)
 
 
 def mend_face(face, bound: float) -> str | None:

@@ -37,7 +37,7 @@ from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_IN, TopAbs_REVERSED, Top
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Edge, TopoDS_Face, TopoDS_Shape
 from scipy.spatial import cKDTree
 
-from .topology import index_map, shape_map
+from .explore import index_map, shape_map
 
 log = logging.getLogger(__name__)
 

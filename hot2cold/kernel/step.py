@@ -21,6 +21,9 @@ from OCP.TopoDS import TopoDS_Shape
 from ..io.atomic import write_atomically
 from ..io.inputs import check_input_file
 from ..errors import KernelError, MorphError, StepReadError
+from .explore import shape_map
+from .faults import solid_faults
+from .validity import check_solids
 
 log = logging.getLogger(__name__)
 
@@ -119,10 +122,6 @@ def read_back(file: str | os.PathLike, written: TopoDS_Shape, path: str | os.Pat
     assembly's instances need not come back in the order they were written).  ``path`` names the output in
     the message.  What a morph's own checks pass can still fail here: the STEP writer approximates, and a
     tolerance the kernel accepted in memory may not survive the file."""
-    from .faults import solid_faults
-    from .topology import shape_map
-    from .validity import check_solids
-
     reader = STEPControl_Reader()
     if reader.ReadFile(str(file)) != IFSelect_RetDone or reader.TransferRoots() == 0:
         raise MorphError(f"the cold STEP for {path} does not read back (reader status); not written")

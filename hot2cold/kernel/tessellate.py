@@ -19,7 +19,7 @@ from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 
 from ..errors import KernelError
-from .topology import shape_map
+from .explore import diagonal, shape_map
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,6 @@ def tessellate(shape: TopoDS_Shape, deflection: float | None = None, angle_deg: 
     """
     work = BRepBuilderAPI_Copy(shape).Shape()
     if deflection is None:
-        from .topology import diagonal
         deflection = 1e-3 * diagonal(work)
     BRepMesh_IncrementalMesh(work, float(deflection), False, float(np.radians(angle_deg)), True)
     vertices, triangles, faces, uvs = [], [], [], []

@@ -21,7 +21,7 @@ from OCP.TopTools import TopTools_IndexedMapOfShape
 from OCP.TopoDS import TopoDS
 
 from ..errors import KernelError
-from .topology import index_map, shape_map
+from .explore import index_map, shape_map
 
 log = logging.getLogger(__name__)
 

@@ -44,7 +44,7 @@ from OCP.XCAFDoc import (XCAFDoc_ColorCurv, XCAFDoc_ColorGen, XCAFDoc_ColorSurf,
 
 from ..errors import KernelError, StepReadError
 from .step import check_output_folder, check_step_file, check_step_shape, console_quiet, write_translated
-from .topology import index_map
+from .explore import index_map
 
 log = logging.getLogger(__name__)
 
