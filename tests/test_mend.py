@@ -149,3 +149,4 @@ def test_a_seam_gap_on_a_reversed_face_moves_the_pcurve_of_that_use(reverse):
     np.testing.assert_array_equal(repair._ends(seam, face)[0], seam_start)
     for kept, now in zip(twin_ends, repair._ends(twin, face)):
         np.testing.assert_array_equal(now, kept)
+

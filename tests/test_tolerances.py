@@ -80,3 +80,35 @@ def test_volume_and_areas_agree_with_a_fine_triangulation():
     from OCP.TopAbs import TopAbs_FACE
     areas = face_areas(shape_map(shape, TopAbs_FACE))
     assert areas.sum() == pytest.approx(0.5 * np.linalg.norm(cross, axis=1).sum(), rel=1e-4)
+
+
+def test_a_reprojected_curve_whose_end_parts_from_its_neighbours_is_closed_onto_them(monkeypatch):
+    """A projection stops at the edge of the surface's domain, which a face may overrun (an Autodesk base
+    plate: a face 5.6e-4 beyond its surface in v); its neighbours' curves end outside.  Here one projected curve
+    of the slid box's top face is made to end 1e-3 off in the face's parameters: the face is closed again in
+    its parameters and the cold solid is valid."""
+    from OCP.BRep import BRep_Builder, BRep_Tool
+    from OCP.gp import gp_Pnt2d
+    from hot2cold.kernel import repair, tolerances
+
+    part, surfaces, top_edges = _slid_box()
+    cold = rebuild(part.kernel, surfaces, [e.curve for e in part.edges], part.vertices)
+    top = next(k for k, f in enumerate(part.faces) if {u.edge for u in f.uses} == top_edges)
+    plain, spoiled = tolerances._reproject, []
+
+    def reproject_then_spoil(edge, face, gap, samples):
+        kept = plain(edge, face, gap, samples)
+        if not spoiled and kept < gap:
+            spline = repair._pcurve(edge, face)
+            end = spline.Pole(spline.NbPoles())
+            spline.SetPole(spline.NbPoles(), gp_Pnt2d(end.X() + 1e-3, end.Y()))
+            BRep_Builder().UpdateEdge(edge, spline, face, BRep_Tool.Tolerance_s(edge))
+            spoiled.append(edge)
+        return kept
+
+    monkeypatch.setattr(tolerances, "_reproject", reproject_then_spoil)
+    fit_tolerances(cold, reproject_above=1e-6)
+    face = cold.faces[top]
+    assert spoiled and max(np.linalg.norm(repair._ends(a, face)[1] - repair._ends(b, face)[0])
+                           for a, b in repair._junctions(face)) == 0
+    assert all(c.valid and c.closed for c in check_solids(cold.shape))

@@ -11,9 +11,12 @@ The gap is measured against the edge's curve on the face (its pcurve), which the
 part.  Under a field that is not affine a face's parameters slide along its surface against its edges' (a
 narrow plane 395 mm long, bilinear, between ten straight edges: 0.046 mm), so the pcurve misses the cold
 edge while the edge lies on the cold surface to 3e-6 mm.  Where the gap is above ``reproject_above``, the
-pcurve is projected again from the cold edge (``ShapeFix_Edge``) and kept if it is nearer: the tolerance
-then states the true gap, and the STEP file reads back valid (the vise under a smooth field on a
-triangulation's nodes: two faces unorientable when read back, with tolerances of 0.07 mm, before).
+pcurve is projected again from the cold edge (``ShapeFix_Edge``) and kept if it is nearer: the tolerance then
+states the true gap, and the STEP file reads back valid (the vise under a smooth field on a triangulation's
+nodes: two faces unorientable when read back, with tolerances of 0.07 mm, before).  A face with such curves
+then has the ends of its curves closed onto each other where they part
+(:func:`~hot2cold.kernel.repair.close_gaps`): a projection stops at the edge of the surface's domain, which a
+face may overrun, where its neighbour's curve ends outside it.
 """
 from __future__ import annotations
 
@@ -33,6 +36,7 @@ from OCP.TopoDS import TopoDS
 
 from ..errors import KernelError
 from .rebuild import ColdKernel
+from .repair import close_gaps
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +91,10 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
     """
     edge_index = TopTools_IndexedMapOfShape()
     TopExp.MapShapes_s(cold.shape, TopAbs_EDGE, edge_index)
-    gaps = np.zeros(len(cold.edges))
-    reprojected = 0
+    pair_gaps: dict = {}          # (edge, face) -> gap
+    reprojected = []              # faces with a curve projected again
     try:
-        for face in cold.faces:
+        for k, face in enumerate(cold.faces):
             explorer = TopExp_Explorer(face, TopAbs_EDGE)
             while explorer.More():
                 edge = TopoDS.Edge_s(explorer.Current())
@@ -100,9 +104,19 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
                 e = edge_index.FindIndex(edge) - 1
                 gap = _gap(edge, face, samples)
                 if gap > reproject_above and not BRep_Tool.IsClosed_s(edge, face):
-                    gap = _reproject(edge, face, gap, samples)
-                    reprojected += 1
-                gaps[e] = max(gaps[e], gap)
+                    kept = _reproject(edge, face, gap, samples)
+                    if kept < gap:
+                        reprojected.append(k)
+                    gap = kept
+                pair_gaps[e, k] = max(pair_gaps.get((e, k), 0.0), gap)
+        for k in dict.fromkeys(reprojected):
+            face = cold.faces[k]
+            if close_gaps(face):
+                for e in [e for e, f in pair_gaps if f == k]:
+                    pair_gaps[e, k] = _gap(cold.edges[e], face, samples)
+        gaps = np.zeros(len(cold.edges))
+        for (e, _), gap in pair_gaps.items():
+            gaps[e] = max(gaps[e], gap)
         builder = BRep_Builder()
         for e, edge in enumerate(cold.edges):
             if margin * gaps[e] > BRep_Tool.Tolerance_s(edge):
@@ -111,5 +125,5 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
     except Exception as exc:
         raise KernelError(f"fitting the cold part's tolerances failed: {exc}") from exc
     log.info("sewed: largest edge gap %.3g mm (%d curves on faces projected again)", gaps.max() if len(gaps) else 0.0,
-             reprojected)
+             len(reprojected))
     return gaps
