@@ -150,3 +150,18 @@ def test_a_seam_gap_on_a_reversed_face_moves_the_pcurve_of_that_use(reverse):
     for kept, now in zip(twin_ends, repair._ends(twin, face)):
         np.testing.assert_array_equal(now, kept)
 
+
+
+def test_a_face_is_named_by_a_point_on_it():
+    """The middle of a face's parameter box is named where it lies on the face; for a face it misses (a ring's
+    hole, a half-annulus), a point on the face's longest edge is."""
+    import cadquery as cq
+    from hot2cold.kernel.faults import face_point
+
+    box = cq.Workplane().box(10, 20, 30).val()
+    top = max(box.Faces(), key=lambda f: f.Center().z)
+    assert face_point(top.wrapped) == pytest.approx((0.0, 0.0, 15.0), abs=1e-9)
+    ring = cq.Workplane().circle(10).circle(8).extrude(2).val()
+    flat = max(ring.Faces(), key=lambda f: f.Center().z if f.geomType() == "PLANE" else -1e9)
+    x, y, z = face_point(flat.wrapped)
+    assert z == pytest.approx(2.0) and 8.0 - 1e-6 <= math.hypot(x, y) <= 10.0 + 1e-6

@@ -11,11 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.BRep import BRep_Tool
+from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
+from OCP.BRepClass import BRepClass_FaceClassifier
+from OCP.GCPnts import GCPnts_AbscissaPoint
+from OCP.gp import gp_Pnt2d
 from OCP.BRepCheck import BRepCheck_Analyzer, BRepCheck_NoError
 from OCP.BRepTools import BRepTools
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_SHELL, TopAbs_VERTEX, TopAbs_WIRE
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON, TopAbs_SHELL, TopAbs_VERTEX, TopAbs_WIRE
 from OCP.TopExp import TopExp_Explorer
+from OCP.TopoDS import TopoDS
 
 from .explore import shape_map
 
@@ -30,10 +35,28 @@ def surface_type(face) -> str:
 
 
 def face_point(face) -> tuple[float, float, float]:
-    """A point ``(3,)`` of ``face``'s surface in mm: the middle of its parameter box (near the face)."""
+    """A point ``(3,)`` on ``face`` in mm: its surface at the middle of its parameter box where that lies on
+    the face, else the middle of its longest edge (the middle of a trimmed or overrun face's box can lie far
+    from it: an NX plate's face was named at a point a million times outside the part)."""
     try:
         u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
-        p = BRepAdaptor_Surface(face).Value((u0 + u1) / 2, (v0 + v1) / 2)
+        u, v = (u0 + u1) / 2, (v0 + v1) / 2
+        if BRepClass_FaceClassifier(face, gp_Pnt2d(u, v), 1e-7).State() in (TopAbs_IN, TopAbs_ON):
+            p = BRepAdaptor_Surface(face).Value(u, v)
+            return (p.X(), p.Y(), p.Z())
+        longest, most = None, -1.0
+        explorer = TopExp_Explorer(face, TopAbs_EDGE)
+        while explorer.More():
+            edge = TopoDS.Edge_s(explorer.Current())
+            explorer.Next()
+            if not BRep_Tool.Degenerated_s(edge):
+                curve = BRepAdaptor_Curve(edge)
+                length = GCPnts_AbscissaPoint.Length_s(curve)
+                if length > most:
+                    longest, most = curve, length
+        if longest is None:
+            return (float("nan"),) * 3
+        p = longest.Value((longest.FirstParameter() + longest.LastParameter()) / 2)
         return (p.X(), p.Y(), p.Z())
     except Exception:  # Standard_Failure on a face without a usable surface
         return (float("nan"),) * 3
