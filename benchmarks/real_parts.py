@@ -308,8 +308,14 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     from hot2cold.kernel.explore import diagonal
     from hot2cold.kernel.validity import check_solids, face_areas
 
+    from hot2cold.errors import Hot2ColdError
+
     run = Run(part=path.stem, path=str(path), nodes_kind=nodes_kind, field=field_name, cad=cad_system(path))
-    hot = read_step(path)
+    try:
+        hot = read_step(path)
+    except Hot2ColdError as exc:       # refused as the command line refuses it, with its exit code and words
+        run.exit_code, run.message = exc.exit_code, f"hot2cold: error: {exc}".replace(f"{ROOT}{os.sep}", "")
+        return run
     faces = solid_faces(hot)
     run.faces = len(faces)
     lo, hi = box(hot)
@@ -463,8 +469,8 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
 #: Failure kinds of a run, in the order the scoreboard lists them: (kind, test on a run).
 KINDS = (
     ("morphed", lambda r: r.ok),
-    ("refused: broken as given", lambda r: r.exit_code == 2 and ("is not valid" in r.message
-                                                                 or "is not closed" in r.message)),
+    ("refused: broken as given", lambda r: r.exit_code == 2 and any(
+        words in r.message for words in ("is not valid", "is not closed", "cannot read STEP file"))),
     ("refused: other input error", lambda r: r.exit_code == 2),
     ("B-spline conversion", lambda r: r.exit_code == 3 and "conversion" in r.message),
     ("other kernel failure", lambda r: r.exit_code == 3),

@@ -111,14 +111,16 @@ def test_step_empty(tmp_path, box, out, capsys):
     _refused(capsys, _morph(hot, box[2], out), 2, r"STEP file is empty: .*empty\.step$", out)
 
 
-@pytest.mark.parametrize("content", ["this is not STEP\n", "truncated"])
-def test_step_corrupt(tmp_path, box, out, capsys, content):
+@pytest.mark.parametrize("content, why", [
+    ("this is not STEP\n", r"line 1 is 'this is not STEP', where a STEP file begins with 'ISO-10303-21;'"),
+    ("s", r"line 1 is 'sISO-10303-21;', where a STEP file begins with 'ISO-10303-21;'"),   # a stray byte first
+    ("truncated", r"not a valid STEP file")])
+def test_step_corrupt(tmp_path, box, out, capsys, content, why):
     hot = tmp_path / "corrupt.step"
     text = box[0].read_text()
-    hot.write_text(text[: len(text) // 2] if content == "truncated" else content)
+    hot.write_text(text[: len(text) // 2] if content == "truncated" else content + text if content == "s" else content)
     _refused(capsys, _morph(hot, box[2], out), 2,
-             r"cannot read STEP file .*corrupt\.step: not a valid STEP file \(reader status IFSelect_RetFail\)$",
-             out)
+             rf"cannot read STEP file .*corrupt\.step: {why} \(reader status IFSelect_RetFail\)$", out)
 
 
 def test_step_with_faces_but_no_solid(tmp_path, box, out, capsys):

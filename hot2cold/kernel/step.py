@@ -41,6 +41,29 @@ def check_step_shape(shape: TopoDS_Shape, path: Path) -> TopoDS_Shape:
     return shape
 
 
+#: The first line of every STEP file (ISO 10303-21).
+_MAGIC = "ISO-10303-21;"
+
+
+def refused(path: Path, status) -> StepReadError:
+    """The error for a STEP file the kernel's reader refused with ``status`` (an ``IFSelect_ReturnStatus``):
+    what its first line tells (it does not begin as a STEP file must, line 1 quoted), else "not a valid STEP
+    file"; for this module's reader and :mod:`hot2cold.kernel.xcaf`'s alike."""
+    return StepReadError(f"cannot read STEP file {path}: {_what_is_wrong(path)} (reader status {status.name})")
+
+
+def _what_is_wrong(path: Path) -> str:
+    """Why a reader refused ``path``, as far as its first line tells: it does not begin as a STEP file must
+    (line 1 quoted), or "not a valid STEP file"."""
+    with open(path, "rb") as fh:
+        head = fh.read(256)
+    first = head.lstrip(b"\xef\xbb\xbf \t\r\n").split(b"\n", 1)[0].strip()
+    if not first.startswith(_MAGIC.encode()):
+        shown = first[:40].decode("ascii", "replace")
+        return f"line 1 is {shown!r}, where a STEP file begins with {_MAGIC!r}"
+    return "not a valid STEP file"
+
+
 def read_step(path: str | os.PathLike) -> TopoDS_Shape:
     """Read a STEP file into one shape (a compound when the file holds several roots).
 
@@ -54,7 +77,7 @@ def read_step(path: str | os.PathLike) -> TopoDS_Shape:
     except Exception as exc:  # the kernel raises Standard_Failure on some corrupt files
         raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
     if status != IFSelect_RetDone:
-        raise StepReadError(f"cannot read STEP file {path}: not a valid STEP file (reader status {status.name})")
+        raise refused(path, status)
     if reader.TransferRoots() == 0:
         raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
     shape = check_step_shape(reader.OneShape(), path)

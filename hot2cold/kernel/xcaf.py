@@ -43,7 +43,8 @@ from OCP.XCAFDoc import (XCAFDoc_ColorCurv, XCAFDoc_ColorGen, XCAFDoc_ColorSurf,
                          XCAFDoc_DocumentTool, XCAFDoc_ShapeTool)
 
 from ..errors import KernelError, StepReadError
-from .step import check_output_folder, check_step_file, check_step_shape, console_quiet, write_translated
+from .step import (check_output_folder, check_step_file, check_step_shape, console_quiet, refused,
+                   write_translated)
 from .explore import index_map
 
 log = logging.getLogger(__name__)
@@ -416,8 +417,7 @@ def read_step_styles(path: str | os.PathLike) -> tuple[TopoDS_Shape, Styles]:
         except Exception as exc:  # the kernel raises Standard_Failure on some corrupt files
             raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
         if status != IFSelect_RetDone:
-            raise StepReadError(f"cannot read STEP file {path}: not a valid STEP file (reader status "
-                                f"{status.name})")
+            raise refused(path, status)
         try:
             transferred = reader.Transfer(document)
         except Exception as exc:
