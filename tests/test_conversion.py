@@ -40,40 +40,11 @@ def _halves(shape: cq.Shape) -> cq.Shape:
     return cq.Shape.cast(divide.Result())
 
 
-def _shifted(shape: cq.Shape, kind: str, by: float) -> cq.Shape:
-    """A copy of ``shape`` whose faces of surface type ``kind`` have their u parameters moved by ``by`` (a
-    whole number of periods: the same face, as an Autodesk export writes a torus over u 5.34 to 11.63)."""
-    copy = cq.Shape.cast(BRepBuilderAPI_Copy(shape.wrapped, True, False).Shape())
-    builder = BRep_Builder()
-    for face in copy.Faces():
-        if face.geomType() != kind:
-            continue
-        seen = TopTools_IndexedMapOfShape()
-        explorer = TopExp_Explorer(face.wrapped, TopAbs_EDGE)
-        while explorer.More():
-            edge = TopoDS.Edge_s(explorer.Current())
-            explorer.Next()
-            if seen.Contains(edge):
-                continue
-            seen.Add(edge)
-            forward = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
-            first = BRep_Tool.CurveOnSurface_s(forward, face.wrapped, 0.0, 0.0).Copy()
-            first.Translate(gp_Vec2d(by, 0.0))
-            tol = BRep_Tool.Tolerance_s(edge)
-            if BRep_Tool.IsClosed_s(edge, face.wrapped):
-                reverse = TopoDS.Edge_s(edge.Oriented(TopAbs_REVERSED))
-                second = BRep_Tool.CurveOnSurface_s(reverse, face.wrapped, 0.0, 0.0).Copy()
-                second.Translate(gp_Vec2d(by, 0.0))
-                builder.UpdateEdge(forward, first, second, face.wrapped, tol)
-            else:
-                builder.UpdateEdge(forward, first, face.wrapped, tol)
-    return copy
-
-
 def _turned(shape: cq.Shape, kind: str, by: float) -> cq.Shape:
     """A copy of ``shape`` whose faces on surfaces of type ``kind`` (cylinder, cone, sphere, torus) lie on the
     same surface with its frame turned back by ``by`` about its axis, their u parameters moved by ``by``: the
-    same faces, as CAD systems write a face over u pi to 3 pi or -pi to pi (across the seam of the turn)."""
+    same faces, as CAD systems write a face over u pi to 3 pi or -pi to pi (across the seam of the turn), or,
+    with ``by`` a whole number of turns, over 2 pi to 4 pi (an Autodesk torus over u 5.34 to 11.63)."""
     from OCP.gp import gp_Ax3, gp_Dir
     from OCP.TopLoc import TopLoc_Location
 
@@ -140,7 +111,7 @@ def _sphere():
 
 def _torus():
     """A torus whose u runs over [2 pi, 4 pi] (its parameters start beyond 2 pi)."""
-    return _shifted(cq.Solid.makeTorus(10, 3), "TORUS", TWO_PI)
+    return _turned(cq.Solid.makeTorus(10, 3), "TORUS", TWO_PI)
 
 
 def _revolved():
@@ -236,7 +207,7 @@ def test_every_surface_morphs_an_affine_field_exactly(name):
 def test_a_broken_solid_is_refused_naming_its_face():
     """A solid whose face's wire crosses itself (a box with two vertices of one face swapped in its pcurves)."""
     box = cq.Workplane().box(10, 10, 10).val()
-    broken = _shifted(box, "PLANE", 0.0)
+    broken = _turned(box, "PLANE", 0.0)          # a copy of its own geometry
     face = broken.Faces()[0]
     edge = TopoDS.Edge_s(TopExp_Explorer(face.wrapped, TopAbs_EDGE).Current())
     curve = BRep_Tool.CurveOnSurface_s(edge, face.wrapped, 0.0, 0.0).Copy()

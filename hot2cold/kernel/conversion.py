@@ -25,13 +25,11 @@ from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurfac
                       Geom_SphericalSurface, Geom_ToroidalSurface)
 from OCP.gp import gp_Ax3, gp_Dir, gp_Vec2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID
-from OCP.TopExp import TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
-from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from ..errors import KernelError
-from .explore import bspline_curve, bspline_surface, diagonal, index_map, shape_map
+from .explore import bspline_curve, bspline_surface, diagonal, edges_of, index_map, shape_map
 from .faults import describe_face, face_faults
 from .repair import face_valid, fix_faces, mend_face
 
@@ -256,15 +254,8 @@ def _move_pcurves(face, by: gp_Vec2d, surface=None) -> None:
     pcurves, stored against the face's surface, are read before)."""
     face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))     # a seam's two pcurves read and written alike
     builder = BRep_Builder()
-    done = TopTools_IndexedMapOfShape()
     moved = []
-    explorer = TopExp_Explorer(face, TopAbs_EDGE)
-    while explorer.More():
-        edge = TopoDS.Edge_s(explorer.Current())
-        explorer.Next()
-        if done.Contains(edge):
-            continue
-        done.Add(edge)
+    for edge in edges_of(face, once=True):
         forward = TopoDS.Edge_s(edge.Oriented(TopAbs_FORWARD))
         curves = [BRep_Tool.CurveOnSurface_s(forward, face, 0.0, 0.0).Copy()]
         if BRep_Tool.IsClosed_s(edge, face):

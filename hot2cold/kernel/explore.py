@@ -9,7 +9,7 @@ from OCP.BRep import BRep_Tool
 from OCP.BRepBndLib import BRepBndLib
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SOLID, TopAbs_VERTEX
-from OCP.TopExp import TopExp
+from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 from OCP.TopTools import TopTools_IndexedMapOfShape
@@ -23,6 +23,22 @@ def shape_map(shape: TopoDS_Shape, kind) -> list:
     cast = {TopAbs_FACE: TopoDS.Face_s, TopAbs_EDGE: TopoDS.Edge_s, TopAbs_VERTEX: TopoDS.Vertex_s,
             TopAbs_SOLID: TopoDS.Solid_s}[kind]
     return [cast(m.FindKey(i)) for i in range(1, m.Size() + 1)]
+
+
+def edges_of(shape: TopoDS_Shape, once: bool = False) -> list:
+    """The edges of ``shape`` as ``TopExp_Explorer`` meets them, oriented as they are used there (a seam of a
+    face twice, once each way); with ``once``, each edge once (its first use)."""
+    edges, seen = [], TopTools_IndexedMapOfShape()
+    explorer = TopExp_Explorer(shape, TopAbs_EDGE)
+    while explorer.More():
+        edge = TopoDS.Edge_s(explorer.Current())
+        explorer.Next()
+        if once:
+            if seen.Contains(edge):
+                continue
+            seen.Add(edge)
+        edges.append(edge)
+    return edges
 
 
 def index_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:

@@ -27,10 +27,12 @@ from OCP.BRepLib import BRepLib
 from OCP.Geom2d import Geom2d_BSplineCurve, Geom2d_Line, Geom2d_TrimmedCurve
 from OCP.Geom2dConvert import Geom2dConvert
 from OCP.gp import gp_Pnt2d
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
+from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeFix import ShapeFix_Face
 from OCP.TopExp import TopExp, TopExp_Explorer
+
+from .explore import edges_of
 from OCP.TopoDS import TopoDS
 
 log = logging.getLogger(__name__)
@@ -75,11 +77,7 @@ def _junctions(face) -> list[tuple]:
     junctions = []
     wires = TopExp_Explorer(face, TopAbs_WIRE)
     while wires.More():
-        uses = []
-        edges = TopExp_Explorer(wires.Current(), TopAbs_EDGE)
-        while edges.More():
-            uses.append(TopoDS.Edge_s(edges.Current()))
-            edges.Next()
+        uses = edges_of(wires.Current())
         wires.Next()
         ends = [_ends(use, face) for use in uses]
         pairs = []
@@ -163,14 +161,10 @@ def widen_tolerances(face, bound: float) -> bool:
     """The second way: let each edge of ``face`` take the tolerance its pcurves need
     (``BRepLib.SameParameter``, forced).  Returns whether every edge stayed within ``bound`` (mm)."""
     within = True
-    explorer = TopExp_Explorer(face, TopAbs_EDGE)
-    while explorer.More():
-        edge = TopoDS.Edge_s(explorer.Current())
-        explorer.Next()
-        if BRep_Tool.Degenerated_s(edge):
-            continue
-        BRepLib.SameParameter_s(edge, BRep_Tool.Tolerance_s(edge), True)
-        within &= BRep_Tool.Tolerance_s(edge) <= bound
+    for edge in edges_of(face, once=True):
+        if not BRep_Tool.Degenerated_s(edge):
+            BRepLib.SameParameter_s(edge, BRep_Tool.Tolerance_s(edge), True)
+            within &= BRep_Tool.Tolerance_s(edge) <= bound
     return within
 
 

@@ -30,11 +30,11 @@ from OCP.GeomAbs import GeomAbs_BSplineCurve
 from OCP.ShapeBuild import ShapeBuild_Edge
 from OCP.ShapeFix import ShapeFix_Edge
 from OCP.TopAbs import TopAbs_EDGE
-from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopExp import TopExp
 from OCP.TopTools import TopTools_IndexedMapOfShape
-from OCP.TopoDS import TopoDS
 
 from ..errors import KernelError
+from .explore import edges_of
 from .rebuild import ColdKernel
 from .repair import close_gaps
 
@@ -95,10 +95,7 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
     reprojected = []              # faces with a curve projected again
     try:
         for k, face in enumerate(cold.faces):
-            explorer = TopExp_Explorer(face, TopAbs_EDGE)
-            while explorer.More():
-                edge = TopoDS.Edge_s(explorer.Current())
-                explorer.Next()
+            for edge in edges_of(face):
                 if BRep_Tool.Degenerated_s(edge):
                     continue
                 e = edge_index.FindIndex(edge) - 1
