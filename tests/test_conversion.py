@@ -251,3 +251,27 @@ def test_a_face_across_the_seam_is_turned_to_begin_at_0_and_stays_where_it_is(ma
         assert BRepCheck_Analyzer(f).IsValid()
         assert BRepTools.UVBounds_s(f)[0] == pytest.approx(0.0, abs=1e-12)
         np.testing.assert_allclose(points(), before, rtol=0, atol=1e-9)
+
+
+def test_an_invalid_cold_solid_is_named_by_its_face():
+    """Exit 4 names what is wrong, as the hot part's refusal does: the face, its kind, a point on it, the
+    statuses (an 11-solid assembly's cold solid 4 was 'not valid (BRepCheck)', no more)."""
+    import dataclasses
+
+    from hot2cold.errors import MorphError
+    from hot2cold.pipeline.checks import check_result
+    from hot2cold.pipeline.morph import morph
+
+    box = cq.Workplane().box(10, 10, 10).val()
+    nodes = fe_surface_nodes(box.wrapped, 1.0, seed=1)[0]
+    result = morph(box, (nodes, np.zeros_like(nodes)), check=False)
+    face = result.cold_kernel.faces[2]
+    edge = TopoDS.Edge_s(TopExp_Explorer(face, TopAbs_EDGE).Current())
+    curve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0).Copy()
+    curve.Translate(gp_Vec2d(3.0, 7.0))
+    BRep_Builder().UpdateEdge(edge, curve, face, BRep_Tool.Tolerance_s(edge))
+    solids = [dataclasses.replace(s, valid=False) for s in result.report.solids]
+    result.report = dataclasses.replace(result.report, solids=solids)
+    with pytest.raises(MorphError, match=r"cold solid 0 is not valid: face 2 \(BSplineSurface, near \(.*\) mm\): "
+                                         r"\w+.*; not written"):
+        check_result(result)

@@ -55,7 +55,8 @@ def check_result(result: MorphResult) -> None:
                          f"field's units and scale, and that it belongs to this part); not written")
     for s, hot_faces in zip(result.report.solids, result.part.solids):
         if not s.valid:
-            raise MorphError(f"cold solid {s.index} is not valid (BRepCheck); not written")
+            fault = solid_fault(result.cold_kernel.shape, s.index) or "BRepCheck"
+            raise MorphError(f"cold solid {s.index} is not valid: {fault}; not written")
         if not s.closed:
             raise MorphError(f"cold solid {s.index} has {s.free_edges} free edges; not written")
         if s.faces != len(hot_faces):
