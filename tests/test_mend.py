@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
-from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeCone, BRepPrimAPI_MakeCylinder
+from OCP.BRepPrimAPI import (BRepPrimAPI_MakeBox, BRepPrimAPI_MakeCone, BRepPrimAPI_MakeCylinder,
+                             BRepPrimAPI_MakeSphere)
 from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt, gp_Pnt2d
 from OCP.TopAbs import TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID
 from OCP.TopoDS import TopoDS
@@ -95,19 +96,49 @@ def test_a_gap_between_two_plain_edges_is_closed_onto_the_end_at_the_vertex(whic
     np.testing.assert_allclose(repair._ends(b, face)[0], start, rtol=0, atol=1e-12)
 
 
-def test_a_gap_on_a_seam_moves_that_seam_side_only():
+def _cylinder_side():
     cylinder = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(1, 2, 3), gp_Dir(0, 0.6, 0.8)), 4.0, 9.0).Shape()
-    face = next(f for f in _converted_faces(cylinder)
-                if any(BRep_Tool.IsClosed_s(a, f) for a, _ in repair._junctions(f)))
-    seam = next(a for a, _ in repair._junctions(face) if BRep_Tool.IsClosed_s(a, face))
-    other = TopoDS.Edge_s(seam.Reversed())
-    other_ends = [e.copy() for e in repair._ends(other, face)]
-    _shift_end(face, seam, 1, (2e-4, 1e-4))
+    return next(f for f in _converted_faces(cylinder) if any(BRep_Tool.IsClosed_s(a, f) for a, _ in
+                                                             repair._junctions(f)))
+
+
+def test_a_gap_at_a_seam_is_closed_onto_the_seam():
+    """A seam's two pcurves are one curve a period apart (iso-lines of the converted surface): at a seam, the
+    other pcurve moves, and neither of the seam's."""
+    face = _cylinder_side()
+    seam, circle = next((a, b) for a, b in repair._junctions(face) if BRep_Tool.IsClosed_s(a, face))
+    twins = [TopoDS.Edge_s(seam.Oriented(o)) for o in (TopAbs_FORWARD, TopAbs_REVERSED)]
+    seam_ends = [[e.copy() for e in repair._ends(t, face)] for t in twins]
+    circle_start = repair._ends(circle, face)[0].copy()
+    _shift_end(face, circle, 0, (2e-4, 1e-4))
     assert not repair.face_valid(face)
     assert repair.mend_face(face, 1e-6) is None
     assert repair.face_valid(face) and max(_gaps(face)) == 0
-    for kept, now in zip(other_ends, repair._ends(other, face)):   # the other side of the seam: untouched
-        np.testing.assert_array_equal(now, kept)
+    np.testing.assert_array_equal(repair._ends(circle, face)[0], circle_start)
+    for twin, kept in zip(twins, seam_ends):
+        for before, now in zip(kept, repair._ends(twin, face)):
+            np.testing.assert_array_equal(now, before)
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_seam_off_a_pole_is_closed_onto_it_on_the_pcurve_of_that_use(reverse):
+    """At a sphere's pole the seam meets the pole's degenerate edge: a seam pcurve drifted off the pole moves
+    back onto its iso-line, and its twin stays; a face reversed in its shell stores its seam's pcurves as the
+    forward face does, so the pcurve moved must be the one of the use that is off."""
+    sphere = BRepPrimAPI_MakeSphere(gp_Ax2(gp_Pnt(3, 1, 2), gp_Dir(0.3, 0.5, 0.8)), 7.0).Shape()
+    face = _converted_faces(sphere)[0]
+    face = TopoDS.Face_s(face.Reversed()) if reverse else face
+    seam, pole = next((a, b) for a, b in repair._junctions(face)
+                      if BRep_Tool.IsClosed_s(a, face) and BRep_Tool.Degenerated_s(b))
+    twin = TopoDS.Edge_s(seam.Reversed())
+    twin_ends = [e.copy() for e in repair._ends(twin, face)]
+    seam_end = repair._ends(seam, face)[1].copy()
+    _shift_end(face, seam, 1, (2e-4, 1e-4))
+    assert not repair.face_valid(face)
+    assert repair.mend_face(face, 1e-6) is None and repair.face_valid(face) and max(_gaps(face)) == 0
+    np.testing.assert_allclose(repair._ends(seam, face)[1], seam_end, rtol=0, atol=1e-12)
+    for kept, now in zip(twin_ends, repair._ends(twin, face)):      # round-off gaps elsewhere closed too
+        np.testing.assert_allclose(now, kept, rtol=0, atol=1e-12)
 
 
 def test_a_face_that_stays_broken_is_named(monkeypatch):
@@ -130,26 +161,6 @@ def test_the_nist_parts_the_conversion_broke_convert_to_valid_solids(name, broke
     solids = shape_map(part.kernel.hot, TopAbs_SOLID)
     assert solids and all(topology.solid_fault(part.kernel.hot, s) is None for s in range(len(solids)))
     assert len(part.faces) == len(raw)
-
-
-@pytest.mark.parametrize("reverse", [False, True])
-def test_a_seam_gap_on_a_reversed_face_moves_the_pcurve_of_that_use(reverse):
-    """A face reversed in its shell stores its seam's pcurves as the forward face does: the mend must move
-    the pcurve of the use that is off, not its twin."""
-    cylinder = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(1, 2, 3), gp_Dir(0, 0.6, 0.8)), 4.0, 9.0).Shape()
-    face = next(f for f in _converted_faces(cylinder)
-                if any(BRep_Tool.IsClosed_s(a, f) for a, _ in repair._junctions(f)))
-    face = TopoDS.Face_s(face.Reversed()) if reverse else face
-    seam = next(a for a, _ in repair._junctions(face) if BRep_Tool.IsClosed_s(a, face))
-    twin = TopoDS.Edge_s(seam.Reversed())
-    twin_ends = [e.copy() for e in repair._ends(twin, face)]
-    seam_start = repair._ends(seam, face)[0].copy()
-    _shift_end(face, seam, 1, (2e-4, 1e-4))
-    assert repair.mend_face(face, 1e-6) is None and repair.face_valid(face) and max(_gaps(face)) == 0
-    np.testing.assert_array_equal(repair._ends(seam, face)[0], seam_start)
-    for kept, now in zip(twin_ends, repair._ends(twin, face)):
-        np.testing.assert_array_equal(now, kept)
-
 
 
 def test_a_face_is_named_by_a_point_on_it():

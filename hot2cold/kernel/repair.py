@@ -9,8 +9,9 @@ degenerate edge of the apex no longer meet in the parameter plane (BRepCheck: ``
 :func:`mend_face` closes such gaps: it walks each wire of the converted face from vertex to vertex (not from
 pcurve end to pcurve end, which would stop at the gap) and moves the end of a pcurve onto the start of the
 next where the two differ.  Where one of the two is a degenerate edge (an apex, a pole: its pcurve is an
-iso-line the conversion keeps exact), the other one moves; otherwise the end whose point on the surface lies
-farther from the vertex moves onto the other.  A move
+iso-line the conversion keeps exact), the other one moves; so where one is a seam (its two pcurves must stay
+a period apart); otherwise the end whose point on the surface lies farther from the vertex moves onto the
+other.  A move
 changes the curve near its end only (the end pole of a clamped B-spline), by the gap.  Where that leaves the
 face invalid, the second way makes the edges' tolerances cover their pcurves (``BRepLib.SameParameter``), up to
 a bound the caller gives; :func:`fix_faces` is the last, ``ShapeFix_Face`` on the faces still broken.
@@ -105,14 +106,17 @@ def close_gaps(face) -> int:
         if np.array_equal(end, start):
             continue
         degenerate = BRep_Tool.Degenerated_s(edge), BRep_Tool.Degenerated_s(following)
+        seam = BRep_Tool.IsClosed_s(edge, face), BRep_Tool.IsClosed_s(following, face)
         if degenerate[0] != degenerate[1]:        # an apex or a pole: the iso-line of the degenerate edge holds
             target = end if degenerate[0] else start
+        elif seam[0] != seam[1]:                  # a seam's two pcurves stay one curve apart by a period
+            target = end if seam[0] else start
         else:                                     # the end whose point on the surface is nearer the vertex
             vertex = BRep_Tool.Pnt_s(TopExp.LastVertex_s(edge, True))
             off = [vertex.Distance(surface.Value(*uv)) for uv in (end, start)]
             target = end if off[0] <= off[1] else start
         for use, which in ((edge, 1), (following, 0)):
-            if degenerate[0] == degenerate[1] or not BRep_Tool.Degenerated_s(use):
+            if not np.array_equal(_ends(use, face)[which], target):
                 _plan(moves, use, which, target, face)
     for forward, orientation, ends in moves:
         _move_ends(forward, orientation, ends, face)

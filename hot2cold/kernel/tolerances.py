@@ -110,7 +110,11 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
             face = cold.faces[k]
             if close_gaps(face):
                 for e in [e for e, f in pair_gaps if f == k]:
-                    pair_gaps[e, k] = _gap(cold.edges[e], face, samples)
+                    pair_gaps[e, k] = 0.0
+                for edge in edges_of(face):            # each use: a seam's two pcurves
+                    if not BRep_Tool.Degenerated_s(edge):
+                        e = edge_index.FindIndex(edge) - 1
+                        pair_gaps[e, k] = max(pair_gaps[e, k], _gap(edge, face, samples))
         gaps = np.zeros(len(cold.edges))
         for (e, _), gap in pair_gaps.items():
             gaps[e] = max(gaps[e], gap)
