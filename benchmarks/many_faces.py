@@ -205,12 +205,16 @@ class StageMemory:
 
     A stage is current from its start to its end; between one stage's end and the next one's start the label
     is ``"after <stage>"`` (that time counts in the next stage's timing: :meth:`peak` names it so).  Outside
-    the morph the caller names what runs (:meth:`set`)."""
+    the morph the caller names what runs (:meth:`set`).  Each stage's CPU time (``time.process_time``, every
+    thread's) is kept as ``report.timings`` keeps its wall time, from the last stage's end (or
+    :meth:`start_clock`) to its own: on a machine shared with other jobs it grows with the work alone."""
 
     def __init__(self):
         self.stage = "start"
         self.samples: list[tuple[float, float, str]] = []       # (seconds, MB, stage)
         self.at_end: dict[str, float] = {}                      # MB when each stage ended
+        self.cpu: dict[str, float] = {}                         # CPU seconds of each stage
+        self._cpu_last = time.process_time()
         self._start = time.perf_counter()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -231,10 +235,16 @@ class StageMemory:
         self.stage = stage
         self._sample()
 
+    def start_clock(self) -> None:
+        """The first stage's CPU time runs from now."""
+        self._cpu_last = time.process_time()
+
     def progress(self, stage: str, done: int, total: int) -> None:
         """The morph's progress callback: ``(stage, 0, total)`` at a stage's start, ``(stage, total, total)``
         at its end."""
         if done >= total:
+            now = time.process_time()
+            self.cpu[stage], self._cpu_last = now - self._cpu_last, now
             self.at_end[stage] = rss_mb()
             self.set(f"after {stage}")
         elif self.stage != stage:
@@ -292,11 +302,13 @@ def run_here(holes: int, field_name: str, spacing: float, threads: int, exact: b
 
         memory.set("read")
         settings = Settings(blas_threads=1, threads=threads)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
+        memory.start_clock()
         result = None
         try:
             result = morph(path, (points, displacements), settings, progress=memory.progress, check=False)
             out["morph"] = time.perf_counter() - start
+            out["morph_cpu"] = time.process_time() - cpu
             out["timings"] = dict(result.report.timings)
             out["delta_max"] = result.report.delta_max
             out["report_valid"] = result.report.valid
@@ -312,6 +324,7 @@ def run_here(holes: int, field_name: str, spacing: float, threads: int, exact: b
             out["exit"], out["message"] = exc.exit_code, str(exc).splitlines()[0]
         out["morph_peak_mb"], out["morph_peak_stage"] = memory.peak(list(out["timings"]) or list(STAGES))
         out["stage_end_mb"] = dict(memory.at_end)
+        out["cpu"] = dict(memory.cpu)
 
         if result is not None:
             memory.set("validity")
@@ -397,18 +410,23 @@ def _cell(x, fmt: str) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    """The figures of ``rows`` as a markdown table."""
+    """The figures of ``rows`` as a markdown table: seconds per stage (wall, ``report.timings``), the morph's
+    wall and CPU seconds, the write, memory (the child's peak ``ru_maxrss``, the sampled peak within the morph
+    and its stage, the baseline before it), the verdict, Δmax, validity and the exact error."""
     stages = [s for s in STAGES if any(s in r["timings"] for r in rows)]
-    head = ("holes", "faces", "nodes", "field", *stages, "morph s", "write s", "peak MB", "base MB",
-            "stage at peak", "exit", "Δmax mm", "valid", "exact mm")
+    head = ("holes", "faces", "nodes", "field", *stages, "morph s", "morph CPU s", "write s", "peak MB",
+            "morph peak MB", "stage at morph peak", "base MB", "exit", "Δmax mm", "valid (free edges, faces)",
+            "exact mm")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         valid = r.get("valid")
+        verdict = _cell(r.get("exit"), "d") + (f" ({r['message'][:80]})" if r.get("message") else "")
         cells = (str(r["holes"]), str(r["faces"]), _cell(r.get("nodes"), "d"), r["field"],
                  *(_cell(r["timings"].get(s), ".2f") for s in stages), _cell(r.get("morph"), ".1f"),
-                 _cell(r.get("write"), ".1f"), _cell(r.get("peak_mb"), ".0f"), _cell(r.get("baseline_mb"), ".0f"),
-                 r.get("peak_stage", "-"), _cell(r.get("exit"), "d"), _cell(r.get("delta_max"), ".2e"),
-                 "-" if valid is None else f"{valid} ({r['free_edges']} free, {r['faces_cold']} faces)",
+                 _cell(r.get("morph_cpu"), ".1f"), _cell(r.get("write"), ".1f"), _cell(r.get("peak_mb"), ".0f"),
+                 _cell(r.get("morph_peak_mb"), ".0f"), r.get("morph_peak_stage", r.get("peak_stage", "-")),
+                 _cell(r.get("baseline_mb"), ".0f"), verdict, _cell(r.get("delta_max"), ".2e"),
+                 "-" if valid is None else f"{valid} ({r['free_edges']}, {r['faces_cold']})",
                  _cell(r.get("exact_max"), ".2e"))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -422,34 +440,62 @@ def exponent(small: float, large: float, ratio: float) -> float:
 
 
 def growth(rows: list[dict]) -> list[str]:
-    """Between consecutive sizes of each field: each stage's time, the morph's and the memory above the
-    baseline as faces^p, with the stages above :data:`SUPERLINEAR` (and at least :data:`JUDGED_SECONDS` s)
-    named."""
+    """Between consecutive sizes of each field: each stage's wall and CPU time, the morph's, and the morph's
+    memory above the baseline as faces^p; a stage whose CPU time (wall time where not measured) grows with p
+    above :data:`SUPERLINEAR`, and takes at least :data:`JUDGED_SECONDS` s at the larger size, is named."""
     lines = []
     for name in dict.fromkeys(r["field"] for r in rows):
         these = sorted((r for r in rows if r["field"] == name and r["timings"]), key=lambda r: r["faces"])
         for a, b in zip(these, these[1:]):
             ratio = b["faces"] / a["faces"]
-            parts = []
-            over = []
+            parts, over = [], []
             for s in STAGES:
-                ta, tb = a["timings"].get(s, 0.0), b["timings"].get(s, 0.0)
-                p = exponent(ta, tb, ratio)
-                if math.isfinite(p):
-                    parts.append(f"{s} {p:.2f}")
-                    if p > SUPERLINEAR and tb >= JUDGED_SECONDS:
-                        over.append(f"{s} ({ta:.2f} -> {tb:.2f} s)")
+                p = exponent(a["timings"].get(s, 0.0), b["timings"].get(s, 0.0), ratio)
+                ca, cb = a.get("cpu", {}).get(s), b.get("cpu", {}).get(s)
+                q = exponent(ca or 0.0, cb or 0.0, ratio)
+                if not math.isfinite(p):
+                    continue
+                parts.append(f"{s} {p:.2f}" + (f"/{q:.2f}" if math.isfinite(q) else ""))
+                judged, seconds = (q, (ca, cb)) if math.isfinite(q) else \
+                    (p, (a["timings"][s], b["timings"][s]))
+                if judged > SUPERLINEAR and seconds[1] >= JUDGED_SECONDS:
+                    over.append(f"{s} ({seconds[0]:.2f} -> {seconds[1]:.2f} s)")
             morph_p = exponent(a.get("morph", 0.0), b.get("morph", 0.0), ratio)
-            memory_p = exponent(a.get("peak_mb", 0.0) - a.get("baseline_mb", 0.0),
-                                b.get("peak_mb", 0.0) - b.get("baseline_mb", 0.0), ratio)
+            morph_q = exponent(a.get("morph_cpu", 0.0), b.get("morph_cpu", 0.0), ratio)
+            grown = [r.get("morph_peak_mb", 0.0) - r.get("baseline_mb", 0.0) for r in (a, b)]
+            memory_p = exponent(*grown, ratio)
             if memory_p > SUPERLINEAR:
-                over.append(f"memory above the baseline ({a['peak_mb'] - a['baseline_mb']:.0f} -> "
-                            f"{b['peak_mb'] - b['baseline_mb']:.0f} MB)")
+                over.append(f"the morph's memory above the baseline ({grown[0]:.0f} -> {grown[1]:.0f} MB)")
             lines.append(f"{name}, {a['faces']} -> {b['faces']} faces (x{ratio:.2f}; nodes x"
-                         f"{b['nodes'] / a['nodes']:.2f}): time ~ faces^p, p: {', '.join(parts)}; morph "
-                         f"{morph_p:.2f}; memory above the baseline {memory_p:.2f}; faster than linear (p > "
-                         f"{SUPERLINEAR:g}): {', '.join(over) or 'none'}")
+                         f"{b['nodes'] / a['nodes']:.2f}): time ~ faces^p, p wall/CPU: {', '.join(parts)}; morph "
+                         f"{morph_p:.2f}/{morph_q:.2f}; the morph's memory above the baseline {memory_p:.2f}; faster "
+                         f"than linear (p > {SUPERLINEAR:g}): {', '.join(over) or 'none'}")
     return lines
+
+
+def details(rows: list[dict]) -> list[str]:
+    """Per run: the exact error and what the benchmark's own steps took; resident memory at each stage's end
+    and the peaks."""
+    lines = []
+    for r in rows:
+        if r.get("exact_max") is not None:
+            lines.append(f"{r['holes']} holes, {r['field']}: exact error {r['exact_max']:.3g} mm (face "
+                         f"{r['exact_face']}, {r['exact_samples']} samples, {r['exact_seconds']:.1f} s)")
+    for r in rows:
+        if r.get("stage_end_mb"):
+            lines.append(f"{r['holes']} holes, {r['field']}: nodes made in {r['nodes_seconds']:.1f} s, validity "
+                         f"checked in {r.get('validity_seconds', float('nan')):.1f} s; resident MB at each stage's "
+                         f"end: " + ", ".join(f"{s} {mb:.0f}" for s, mb in r["stage_end_mb"].items())
+                         + f"; sampled peak in the morph {r['morph_peak_mb']:.0f} MB ({r['morph_peak_stage']}), in "
+                         f"the run {r['sampled_peak_mb']:.0f} MB ({r['peak_stage']}), ru_maxrss {r['peak_mb']:.0f} "
+                         f"MB; the parent saw {r.get('watched_peak_mb', 0.0):.0f} MB")
+    return lines
+
+
+def summary(rows: list[dict], threads: int | str, spacing: float | str) -> str:
+    """The table, the growth between sizes and the details of ``rows``."""
+    head = f"the morph in {threads} threads, nodes {spacing} mm apart; wall seconds per stage (report.timings)"
+    return "\n".join([head, table(rows), "", *growth(rows), "", *details(rows)])
 
 
 # ------------------------------------------------------------------------------------------------ main
@@ -473,6 +519,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, help="save the runs here")
     parser.add_argument("--profile", type=Path, metavar="DIR", help="run each child under cProfile, stats to DIR")
     parser.add_argument("--build-only", action="store_true", help="build (or find) the parts and stop")
+    parser.add_argument("--show", type=Path, metavar="JSON", help="print the tables of runs saved with --json")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)              # child: one size and field
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--exact-here", action="store_true", help=argparse.SUPPRESS)
@@ -498,6 +545,10 @@ def main(argv=None) -> int:
         args.out.write_text(json.dumps(row))
         return 0
 
+    if args.show:
+        rows = json.loads(args.show.read_text())
+        print(summary(rows, rows[0].get("threads", "?") if rows else "?", rows[0].get("spacing", "?") if rows else "?"))
+        return 0
     for holes in args.holes:
         path, seconds = cached_part(holes, args.cache)
         made = f"built in {seconds:.1f} s" if seconds is not None else "cached"
@@ -511,27 +562,13 @@ def main(argv=None) -> int:
             row = run_child(holes, name, args)
             rows.append(row)
             print(f"{holes} x {holes} holes, {name}: exit {row.get('exit')} morph {_cell(row.get('morph'), '.1f')} s "
-                  f"peak {row['peak_mb']:.0f} MB in {row.get('peak_stage')} {row.get('message', '')}", flush=True)
+                  f"peak {row['peak_mb']:.0f} MB in {row.get('peak_stage')}"
+                  + (f": {row['message']}" if row.get("message") else ""), flush=True)
             if args.json:
                 args.json.parent.mkdir(parents=True, exist_ok=True)
                 args.json.write_text(json.dumps(rows, indent=1))
     print()
-    print(f"the morph in {args.threads} threads, nodes {args.spacing:g} mm apart; seconds per stage (report.timings)")
-    print(table(rows))
-    print()
-    for line in growth(rows):
-        print(line)
-    for r in rows:
-        if r.get("exact_max") is not None:
-            print(f"{r['holes']} holes, {r['field']}: exact error {r['exact_max']:.3g} mm (face {r['exact_face']}, "
-                  f"{r['exact_samples']} samples, {r['exact_seconds']:.1f} s); validity check "
-                  f"{r['validity_seconds']:.1f} s; nodes made in {r['nodes_seconds']:.1f} s")
-    for r in rows:
-        if r.get("stage_end_mb"):
-            print(f"{r['holes']} holes, {r['field']}: resident MB at each stage's end: "
-                  + ", ".join(f"{s} {mb:.0f}" for s, mb in r["stage_end_mb"].items())
-                  + f"; sampled peak in the morph {r['morph_peak_mb']:.0f} MB ({r['morph_peak_stage']}), in "
-                    f"the run {r['sampled_peak_mb']:.0f} MB ({r['peak_stage']}), ru_maxrss {r['peak_mb']:.0f} MB")
+    print(summary(rows, args.threads, f"{args.spacing:g}"))
     return 0
 
 
