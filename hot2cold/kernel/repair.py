@@ -11,10 +11,10 @@ pcurve end to pcurve end, which would stop at the gap) and moves the end of a pc
 next where the two differ.  Where one of the two is a degenerate edge (an apex, a pole: its pcurve is an
 iso-line the conversion keeps exact), the other one moves; so where one is a seam (its two pcurves must stay
 a period apart); otherwise the end whose point on the surface lies farther from the vertex moves onto the
-other.  A move
-changes the curve near its end only (the end pole of a clamped B-spline), by the gap.  Where that leaves the
-face invalid, the second way makes the edges' tolerances cover their pcurves (``BRepLib.SameParameter``), up to
-a bound the caller gives; :func:`fix_faces` is the last, ``ShapeFix_Face`` on the faces still broken.
+other.  A move changes the curve near its end only (the end pole of a clamped B-spline), by the gap.  Where
+that leaves the face invalid, the second way makes the edges' tolerances cover their pcurves
+(``BRepLib.SameParameter``), up to a bound the caller gives; :func:`fix_faces` is the last, ``ShapeFix_Face``
+on the faces still broken.
 """
 from __future__ import annotations
 
@@ -28,13 +28,13 @@ from OCP.BRepLib import BRepLib
 from OCP.Geom2d import Geom2d_BSplineCurve, Geom2d_Line, Geom2d_TrimmedCurve
 from OCP.Geom2dConvert import Geom2dConvert
 from OCP.gp import gp_Pnt2d
-from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeFix import ShapeFix_Face
+from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
 from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopoDS import TopoDS
 
 from .explore import edges_of
-from OCP.TopoDS import TopoDS
 
 log = logging.getLogger(__name__)
 
