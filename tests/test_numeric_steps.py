@@ -122,6 +122,23 @@ def test_field_estimator_reaches_past_a_flat_neighbourhood():
     assert not Span.of(pts[idx[:1]], np.ones((1, 20), bool)).off(on, OFF_SPAN).any()
 
 
+def test_field_estimator_takes_no_gradient_across_a_plane_s_rounding():
+    """Foot points of a tilted plane face, off it by nothing but its projection's rounding (2e-8 mm over a
+    neighbourhood 80 mm across, as on NIST CTC-02's face 146), and a point 18 mm beside them: that spread
+    carries no gradient across the plane (a fit through it took the values' rounding times 1e10 and put an
+    affine field 2.5 mm off), so the field's change across comes from the foot points that span it."""
+    normal = np.array([1.0, 0.0, 0.03]) / np.hypot(1.0, 0.03)
+    along = np.cross(normal, [0.0, 1.0, 0.0])
+    uv = RNG.uniform(-40, 40, (400, 2))
+    plane = (250.0 * normal + uv[:, :1] * along + uv[:, 1:] * [0.0, 1.0, 0.0]
+             + RNG.uniform(-1e-8, 1e-8, (400, 1)) * normal)
+    far = 250.0 * normal + RNG.uniform(-40, 40, (60, 3)) - 60.0 * normal        # another face, 60 mm in
+    pts = np.concatenate([plane, far])
+    est = FieldEstimator(pts, pts @ A.T + B - pts, neighbours=20)
+    beside = 250.0 * normal + 18.0 * normal + RNG.uniform(-30, 30, (20, 1)) * along
+    assert np.abs(est(beside) - (beside @ A.T + B - beside)).max() <= 1e-8
+
+
 @pytest.mark.parametrize("shape", ["spread", "plane", "line", "one point"])
 def test_linear_pinv_from_the_span_is_numpy_s(shape):
     """The linear fit's pseudo-inverse built from the SVD of the centred offsets alone (the column of ones

@@ -24,8 +24,13 @@ from scipy.spatial import cKDTree
 
 #: Quadratic monomials: products of the coordinate offsets (x x, y y, z z, x y, x z, y z).
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
-#: Relative cut-off of the singular values of a linear fit (pseudo-inverse).
-LINEAR_RCOND = 1e-10
+#: Relative cut-off of the singular values of a linear fit (pseudo-inverse): a neighbourhood that spreads by
+#: less than this share of its size in a direction does not spread in it.  Foot points projected onto a plane
+#: lie off it by the projection's rounding; a gradient fitted across that spread is the values' rounding
+#: divided by it twice over (the thin singular vector's own error is rounding over the spread), and an
+#: estimate beside the plane took it times the distance.  Cut, the gradient across comes from wider
+#: neighbourhoods that span it (:meth:`hot2cold.pipeline.artificial.FieldEstimator._spanning`).
+LINEAR_RCOND = 1e-6
 #: A neighbourhood whose offsets from its centre are all below this share of the centre's size is one point:
 #: its offsets are rounding, and a fit over them would take a gradient from noise.
 _SAME_POINT = 1e-13
