@@ -289,3 +289,43 @@ def test_node_spacings_are_the_distances_to_the_nearest_other_foot_point():
         expected = np.where(used, d.min(axis=1, initial=np.inf), np.nan)
         expected[np.isinf(expected)] = np.nan
         np.testing.assert_array_equal(cls.spacings, expected)
+
+
+def _brute_closing(hot, cold, spacing):
+    i, j = np.triu_indices(len(hot), 1)
+    d_hot = np.linalg.norm(hot[i] - hot[j], axis=1)
+    d_cold = np.linalg.norm(cold[i] - cold[j], axis=1)
+    return int(np.count_nonzero((d_cold < 2 * spacing) & (d_hot > 2 * d_cold + spacing)))
+
+
+def test_closing_pairs_finds_a_gap_that_closed_and_nothing_else():
+    """Two plates 3 mm apart (grid 1 mm, spacing 1 mm), a dense cluster of a small face's grid among them:
+    moved rigidly, no pair closes; with the upper plate pressed to 0.5 mm above the lower one over a patch,
+    pairs close, as counting every pair finds."""
+    from hot2cold.pipeline.checks import closing_pairs
+
+    x, y = np.meshgrid(np.arange(20.0), np.arange(20.0), indexing="ij")
+    plate = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    cluster = RNG.uniform(0, 0.05, (300, 3)) + [5.0, 5.0, 1.5]       # a tiny face's 300 grid points
+    hot = np.concatenate([plate, plate + [0, 0, 3.0], cluster])
+    rigid = hot @ A.T + B
+    assert closing_pairs(hot, rigid, 1.0) == 0 == _brute_closing(hot, rigid, 1.0)
+    pressed = hot.copy()
+    upper = slice(len(plate), 2 * len(plate))
+    patch = np.linalg.norm(pressed[upper, :2] - [14.0, 14.0], axis=1) < 3.0
+    pressed[np.arange(len(plate), 2 * len(plate))[patch], 2] = 0.5
+    assert _brute_closing(hot, pressed, 1.0) > 0
+    assert closing_pairs(hot, pressed, 1.0) > 0
+
+
+def test_closing_pairs_misses_no_pair_of_the_whole_set():
+    """Random clouds of clustered points moved by random local squeezes: wherever counting every pair finds
+    one closing, the count over the points kept finds one too."""
+    from hot2cold.pipeline.checks import closing_pairs
+
+    for _ in range(30):
+        centres = RNG.uniform(0, 10, (15, 3))
+        hot = (centres[:, None, :] + RNG.normal(0, RNG.uniform(0.01, 1.0), (15, 40, 3))).reshape(-1, 3)
+        cold = hot + RNG.normal(0, 1.0, (15, 1, 3)).repeat(40, axis=1).reshape(-1, 3)
+        if _brute_closing(hot, cold, 1.0):
+            assert closing_pairs(hot, cold, 1.0) > 0

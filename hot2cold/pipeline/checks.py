@@ -719,16 +719,11 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
                 f"(the part is {part.diagonal:.4g} mm across)")
     log.info("the cold part moves face %d farthest, by %.4g mm (%.4g mm accepted: the field's largest "
              "displacement %.4g mm)", farthest[1], farthest[0], scale.move_bound, scale.largest)
-    hot, cold = np.concatenate(hot_points), np.concatenate(cold_points)
-    pairs = cKDTree(cold).query_pairs(2.0 * spacing, output_type="ndarray")
-    if len(pairs):
-        d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
-        d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
-        closing = int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing))
-        if closing:
-            log.info("%d pairs of points came closer than half their hot distance: checking the cold part for "
-                     "self-intersection", closing)
-            _check_crossing(part, cold_kernel, problems)
+    closing = closing_pairs(np.concatenate(hot_points), np.concatenate(cold_points), spacing)
+    if closing:
+        log.info("%d pairs of points came closer than half their hot distance: checking the cold part for "
+                 "self-intersection", closing)
+        _check_crossing(part, cold_kernel, problems)
     if np.isfinite(between).any():
         k = int(np.nanargmax(between))
         log.info("between the nodes the cold part is at most %.3g mm (face %d) from the field's local estimate",
@@ -807,6 +802,35 @@ def _points_and_normals(hot, cold, uv: np.ndarray):
             and (hot.weights is None) == (cold.weights is None)
             and (hot.weights is None or np.array_equal(hot.weights, cold.weights)))
     return hot_out, evaluate(cold, bases if same else None)[1]
+
+
+#: :func:`closing_pairs` takes one point for all points within this share of the spacing of each other, hot
+#: and cold.
+_SAME_SHARE = 1 / 8
+
+
+def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
+    """How many pairs of the points ``hot (m, 3)``, moved to ``cold (m, 3)``, are less than ``2 spacing`` apart
+    cold and were more than twice as far apart, and ``spacing`` farther, hot (``d_hot > 2 d_cold + spacing``):
+    where a gap of the part may have closed.  0 means none.
+
+    Points less than ``eps = _SAME_SHARE x spacing`` from another one both hot and cold count as one: a small
+    face's grid (at least ``degree + 1`` points a knot span whatever its size) puts hundreds of points within
+    reach of each other, and their pairs grew with the square of the points (a 5680-face board: 2.3 GB).
+    Pairs of the points kept are counted with the margins widened by ``eps`` on each point (``d_hot > 2 d_cold
+    + spacing - 3 eps`` within ``2 spacing + 2 eps``), so a pair of the whole set that qualifies has a pair of
+    kept points that does: the count may grow, a closing gap is not missed."""
+    eps = _SAME_SHARE * spacing
+    cell = eps / np.sqrt(3.0)                                # one cell: within eps of each other hot and cold
+    keys = np.floor(np.column_stack([hot, cold]) / cell).astype(np.int64)
+    keep = np.unique(keys, axis=0, return_index=True)[1]
+    hot, cold = hot[keep], cold[keep]
+    pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray")
+    if not len(pairs):
+        return 0
+    d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
+    d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
+    return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 3.0 * eps))
 
 
 def _check_crossing(part: Part, cold_kernel: ColdKernel, problems: dict[int, list[str]]) -> None:
