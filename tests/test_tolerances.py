@@ -112,3 +112,53 @@ def test_a_reprojected_curve_whose_end_parts_from_its_neighbours_is_closed_onto_
     assert spoiled and max(np.linalg.norm(repair._ends(a, face)[1] - repair._ends(b, face)[0])
                            for a, b in repair._junctions(face)) == 0
     assert all(c.valid and c.closed for c in check_solids(cold.shape))
+
+
+def _touching_hole(centre_x: float):
+    """A 20 x 10 mm plane face (in B-spline form, as a morph leaves it) with a round hole whose circle passes
+    through the vertex (10, 0) of the face's outline and shares it: centred at (``centre_x``, 3), so tangent to
+    the outline there (a hole that touches it) or turned and crossing the outline again at ``2 centre_x - 10``,
+    as a morph leaves such a touch (on a real part 6e-3 to 8e-3 mm off the vertex)."""
+    from OCP.BRepBuilderAPI import (BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeVertex,
+                                    BRepBuilderAPI_MakeWire, BRepBuilderAPI_NurbsConvert)
+    from OCP.gp import gp_Ax2, gp_Circ, gp_Dir, gp_Pnt
+    from OCP.TopoDS import TopoDS
+
+    touch = BRepBuilderAPI_MakeVertex(gp_Pnt(10, 0, 0)).Vertex()
+    corners = [BRepBuilderAPI_MakeVertex(gp_Pnt(*p)).Vertex() for p in ((20, 0, 0), (20, 10, 0), (0, 10, 0), (0, 0, 0))]
+    ring = [touch, *corners, touch]
+    outline = BRepBuilderAPI_MakeWire()
+    for a, b in zip(ring[:-1], ring[1:]):
+        outline.Add(BRepBuilderAPI_MakeEdge(a, b).Edge())
+    radius = float(np.hypot(centre_x - 10.0, 3.0))
+    circle = gp_Circ(gp_Ax2(gp_Pnt(centre_x, 3, 0), gp_Dir(0, 0, -1)), radius)
+    hole = BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(circle, touch, touch).Edge()).Wire()
+    maker = BRepBuilderAPI_MakeFace(outline.Wire())
+    maker.Add(hole)
+    return TopoDS.Face_s(BRepBuilderAPI_NurbsConvert(maker.Face(), True).Shape())
+
+
+def test_a_hole_touching_the_outline_keeps_its_shared_vertex_valid():
+    """A hole sharing a vertex with the face's outline: tangent there, valid, and its vertex keeps its
+    tolerance; turned so that it meets the outline again 1 mm off the vertex, IntersectingWires, until the
+    vertex's tolerance holds that meeting, within ``touch_bound`` (and only then)."""
+    from hot2cold.kernel.explore import shape_map
+    from hot2cold.kernel.faults import face_faults
+    from hot2cold.kernel.rebuild import ColdKernel
+    from hot2cold.kernel.repair import face_valid
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
+
+    def fitted(face, bound):
+        cold = ColdKernel(face, [face], shape_map(face, TopAbs_EDGE), shape_map(face, TopAbs_VERTEX))
+        fit_tolerances(cold, touch_bound=bound)
+        return max(BRep_Tool.Tolerance_s(v) for v in cold.vertices)
+
+    tangent = _touching_hole(10.0)
+    assert face_valid(tangent)
+    assert fitted(tangent, 2.0) <= 1e-6
+    for bound, valid in ((0.5, False), (2.0, True)):
+        face = _touching_hole(10.5)
+        assert "IntersectingWires" in face_faults(face)
+        assert (fitted(face, bound) >= 1.0) is valid
+        assert face_valid(face) is valid

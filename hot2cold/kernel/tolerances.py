@@ -26,11 +26,15 @@ import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepLib import BRepLib
+from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
+from OCP.Geom2dInt import Geom2dInt_GInter
 from OCP.GeomAbs import GeomAbs_BSplineCurve
+from OCP.IntRes2d import IntRes2d_Domain
 from OCP.ShapeBuild import ShapeBuild_Edge
 from OCP.ShapeFix import ShapeFix_Edge
-from OCP.TopAbs import TopAbs_EDGE
-from OCP.TopExp import TopExp
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX, TopAbs_WIRE
+from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopoDS import TopoDS
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from ..errors import KernelError
@@ -43,6 +47,8 @@ log = logging.getLogger(__name__)
 
 #: A B-spline edge is sampled at least this many times per knot of its 3D curve.
 _PER_KNOT = 8
+#: Two curves on a face meet where they are less than this apart in its parameters (BRepCheck's own).
+_MEET_TOLERANCE = 1e-10
 
 
 def _gap(edge, face, n: int) -> float:
@@ -79,8 +85,61 @@ def _reproject(edge, face, gap: float, samples: int) -> float:
     return gap
 
 
+def _on_face(edge, face) -> tuple:
+    """The curve of ``edge`` on ``face`` and its domain, as BRepCheck intersects the wires of a face."""
+    first, last = BRep_Tool.Range_s(edge, face)
+    curve = Geom2dAdaptor_Curve(BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0))
+    first, last = max(first, curve.FirstParameter()), min(last, curve.LastParameter())
+    return curve, IntRes2d_Domain(curve.Value(first), first, _MEET_TOLERANCE, curve.Value(last), last,
+                                  _MEET_TOLERANCE)
+
+
+def _touches(face) -> list[tuple]:
+    """Where two wires of ``face`` share a vertex (a hole whose outline touches the face's outline there): per
+    such vertex and pair of its edges on two wires, ``(vertex, d)``, ``d`` the distance (mm) from the vertex
+    to the farthest point where the two edges' curves on the face meet (0 where they meet at the vertex
+    alone)."""
+    wires = []
+    explorer = TopExp_Explorer(face, TopAbs_WIRE)
+    while explorer.More():
+        wires.append(edges_of(explorer.Current()))
+        explorer.Next()
+    if len(wires) < 2:
+        return []
+    vertices = TopTools_IndexedMapOfShape()
+    TopExp.MapShapes_s(face, TopAbs_VERTEX, vertices)
+    at: dict[int, list] = {}            # vertex (its index) -> [(wire, edge)]
+    for w, edges in enumerate(wires):
+        for edge in edges:
+            if not BRep_Tool.Degenerated_s(edge):
+                for vertex in (TopExp.FirstVertex_s(edge), TopExp.LastVertex_s(edge)):
+                    at.setdefault(vertices.FindIndex(vertex), []).append((w, edge))
+    surface = BRep_Tool.Surface_s(face)
+    out = []
+    for index, uses in at.items():
+        if len({w for w, _ in uses}) < 2:
+            continue
+        vertex = TopoDS.Vertex_s(vertices.FindKey(index))
+        point = BRep_Tool.Pnt_s(vertex)
+        for i, (wa, ea) in enumerate(uses):
+            for wb, eb in uses[i + 1:]:
+                if wa == wb:
+                    continue
+                found = Geom2dInt_GInter(*_on_face(ea, face), *_on_face(eb, face), _MEET_TOLERANCE, _MEET_TOLERANCE)
+                if not found.IsDone():
+                    continue
+                ends = [found.Point(k).Value() for k in range(1, found.NbPoints() + 1)]
+                for k in range(1, found.NbSegments() + 1):
+                    segment = found.Segment(k)
+                    ends += [p.Value() for p, has in ((segment.FirstPoint(), segment.HasFirstPoint()),
+                                                      (segment.LastPoint(), segment.HasLastPoint())) if has]
+                d = max((surface.Value(q.X(), q.Y()).Distance(point) for q in ends), default=0.0)
+                out.append((vertex, d))
+    return out
+
+
 def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
-                   reproject_above: float = np.inf) -> np.ndarray:
+                   reproject_above: float = np.inf, touch_bound: float = 0.0) -> np.ndarray:
     """Fit edge and vertex tolerances of the cold shape ``cold`` (from :func:`~hot2cold.kernel.rebuild.rebuild`,
     changed in place) to the morphed geometry.
 
@@ -88,6 +147,13 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
     its 3D curve and its curve on any face it bounds; where that is above ``reproject_above`` (mm) on a face
     the edge bounds once (not a seam), the curve on the face is projected again from the 3D curve and kept
     if nearer (see the module docstring).  Edge tolerances become at least ``margin`` times that gap.
+
+    A vertex that two wires of a face share (a hole touching the face's outline) gets at least ``margin``
+    times the distance to where their curves on the face meet near it, up to ``touch_bound`` (mm)
+    (:func:`_touches`): two edges tangent there when hot, each fitted to its own nodes, part at slightly
+    different angles and meet again a little way off, with a sliver between them far thinner than that
+    distance; BRepCheck takes a meeting of two wires within the tolerance of a vertex they share as that
+    vertex, any other as IntersectingWires.
     """
     edge_index = TopTools_IndexedMapOfShape()
     TopExp.MapShapes_s(cold.shape, TopAbs_EDGE, edge_index)
@@ -123,6 +189,14 @@ def fit_tolerances(cold: ColdKernel, samples: int = 51, margin: float = 1.5,
             if margin * gaps[e] > BRep_Tool.Tolerance_s(edge):
                 builder.UpdateEdge(edge, margin * gaps[e])
         BRepLib.UpdateTolerances_s(cold.shape, False)
+        touching = 0
+        for face in cold.faces:
+            for vertex, d in _touches(face):
+                if BRep_Tool.Tolerance_s(vertex) < d <= touch_bound:
+                    builder.UpdateVertex(vertex, margin * d)
+                    touching += 1
+        if touching:
+            log.info("%d vertices where two wires of a face touch hold where the wires meet beside them", touching)
     except Exception as exc:
         raise KernelError(f"fitting the cold part's tolerances failed: {exc}") from exc
     log.info("sewed: largest edge gap %.3g mm (%d curves on faces projected again)", gaps.max() if len(gaps) else 0.0,

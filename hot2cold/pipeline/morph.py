@@ -68,6 +68,9 @@ _KINK_NOISE_DEG = 1e-6
 #: of the part's diagonal (:func:`~hot2cold.kernel.tolerances.fit_tolerances`): the faces' parameters slid
 #: against the edges', which an affine field never does.
 _REPROJECT_SHARE = 1e-7
+#: A vertex two wires of a face share may widen to hold where the wires meet beside it up to this share of the
+#: part's diagonal (:func:`~hot2cold.kernel.tolerances.fit_tolerances`'s ``touch_bound``).
+_TOUCH_SHARE = 1e-4
 
 #: Rounds of the G1 correction at the most: each round freezes the faces the last one moved off their nodes.
 _G1_ROUNDS = 3
@@ -910,7 +913,8 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     cold = rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
     stages.lap("rebuild")
     stages.begin("sew")
-    gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal)
+    gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal,
+                          touch_bound=_TOUCH_SHARE * part.diagonal)
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
     stages.begin("check")
