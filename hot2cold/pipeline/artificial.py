@@ -155,9 +155,10 @@ class FieldEstimator:
         return out
 
     def _spanning(self, x: np.ndarray) -> np.ndarray:
-        """Linear estimates ``(m, 3)`` at points ``x (m, 3)`` that lie off the plane or line of their
-        neighbourhood: over ever more nearest foot points (4, 16, ... times ``k``, thinned to about
-        ``MAX_NEIGHBOURS``) until they span the point's direction, else over the widest.
+        """Estimates ``(m, 3)`` at points ``x (m, 3)`` that lie off the plane or line of their neighbourhood, the
+        linear fit plus the trusted share of the quadratic correction as :meth:`__call__`'s: over ever more
+        nearest foot points (4, 16, ... times ``k``, thinned to about ``MAX_NEIGHBOURS``) until they span the
+        point's direction, else over the widest.
 
         A flat neighbourhood (the foot points of one planar face, or of a straight edge) says nothing about the
         field's change across it, and the pseudo-inverse takes none: an affine field was 2.9e-3 mm off at an
@@ -169,8 +170,8 @@ class FieldEstimator:
             k = min(4 * k, len(self._points))
             dist, _ = self._tree.query(x[pending], k=k)
             wide, valid = self._wide(x[pending], dist[:, -1] * (1 + 1e-12))
-            fit = fits_at(self._points[wide], self._disp[wide], valid, x[pending], False, OFF_SPAN)
-            out[pending] = fit.linear
+            fit = fits_at(self._points[wide], self._disp[wide], valid, x[pending], self._quadratic, OFF_SPAN)
+            out[pending] = fit.linear + fit.trust[:, None] * fit.correction
             if k == len(self._points):
                 break
             pending = pending[fit.off_span]
