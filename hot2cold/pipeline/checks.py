@@ -816,10 +816,11 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
 
     Points less than ``eps = _SAME_SHARE x spacing`` from another one both hot and cold count as one: a small
     face's grid (at least ``degree + 1`` points a knot span whatever its size) puts hundreds of points within
-    reach of each other, and their pairs grew with the square of the points (a 5680-face board: 2.3 GB).
-    Pairs of the points kept are counted with the margins widened by ``eps`` on each point (``d_hot > 2 d_cold
-    + spacing - 3 eps`` within ``2 spacing + 2 eps``), so a pair of the whole set that qualifies has a pair of
-    kept points that does: the count may grow, a closing gap is not missed."""
+    reach of each other, and their pairs grew with the square of its points.
+    Pairs of the points kept are counted with the margins widened by ``eps`` on each point (either distance
+    changes by up to ``2 eps``: ``d_hot > 2 d_cold + spacing - 6 eps`` within ``2 spacing + 2 eps``), so a pair
+    of the whole set that qualifies has a pair of kept points that does: the count may grow, a closing gap is
+    not missed."""
     eps = _SAME_SHARE * spacing
     cell = eps / np.sqrt(3.0)                                # one cell: within eps of each other hot and cold
     keys = np.floor(np.column_stack([hot, cold]) / cell).astype(np.int64)
@@ -830,7 +831,7 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
         return 0
     d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
     d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
-    return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 3.0 * eps))
+    return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
 
 
 def _check_crossing(part: Part, cold_kernel: ColdKernel, problems: dict[int, list[str]]) -> None:
