@@ -8,7 +8,7 @@ from OCP.Bnd import Bnd_Box
 from OCP.BRep import BRep_Tool
 from OCP.BRepBndLib import BRepBndLib
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SOLID, TopAbs_VERTEX
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_SOLID, TopAbs_VERTEX, TopAbs_WIRE
 from OCP.TopExp import TopExp, TopExp_Explorer
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
@@ -40,6 +40,17 @@ def edges_of(shape: TopoDS_Shape, once: bool = False) -> list:
         edges.append(edge)
     return edges
 
+
+
+def wire_edges(face) -> list[list]:
+    """Per wire of ``face`` as ``TopExp_Explorer`` meets them, its edge uses (:func:`edges_of`), oriented as the
+    face runs them."""
+    out = []
+    explorer = TopExp_Explorer(face, TopAbs_WIRE)
+    while explorer.More():
+        out.append(edges_of(explorer.Current()))
+        explorer.Next()
+    return out
 
 def index_map(shape: TopoDS_Shape, kind) -> TopTools_IndexedMapOfShape:
     """The kernel's indexed map of the sub-shapes of ``kind`` (1-based; ``FindIndex`` gives k + 1)."""

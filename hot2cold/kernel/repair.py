@@ -30,11 +30,11 @@ from OCP.Geom2dConvert import Geom2dConvert
 from OCP.gp import gp_Pnt2d
 from OCP.ShapeBuild import ShapeBuild_ReShape
 from OCP.ShapeFix import ShapeFix_Face
-from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_WIRE
-from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED
+from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS
 
-from .explore import edges_of
+from .explore import edges_of, wire_edges
 
 log = logging.getLogger(__name__)
 
@@ -76,10 +76,7 @@ def _junctions(face) -> list[tuple]:
     several, as at a seam's vertex, the one whose pcurve starts nearest); found from the vertices, so a gap in
     the parameter plane does not stop the walk."""
     junctions = []
-    wires = TopExp_Explorer(face, TopAbs_WIRE)
-    while wires.More():
-        uses = edges_of(wires.Current())
-        wires.Next()
+    for uses in wire_edges(face):
         ends = [_ends(use, face) for use in uses]
         pairs = []
         for i, arriving in enumerate(uses):

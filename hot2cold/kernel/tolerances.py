@@ -32,13 +32,13 @@ from OCP.GeomAbs import GeomAbs_BSplineCurve
 from OCP.IntRes2d import IntRes2d_Domain
 from OCP.ShapeBuild import ShapeBuild_Edge
 from OCP.ShapeFix import ShapeFix_Edge
-from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX, TopAbs_WIRE
-from OCP.TopExp import TopExp, TopExp_Explorer
+from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
+from OCP.TopExp import TopExp
 from OCP.TopoDS import TopoDS
 from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from ..errors import KernelError
-from .explore import edges_of
+from .explore import edges_of, wire_edges
 from .rebuild import ColdKernel
 from .repair import close_gaps
 
@@ -99,11 +99,7 @@ def _touches(face) -> list[tuple]:
     such vertex and pair of its edges on two wires, ``(vertex, d)``, ``d`` the distance (mm) from the vertex
     to the farthest point where the two edges' curves on the face meet (0 where they meet at the vertex
     alone)."""
-    wires = []
-    explorer = TopExp_Explorer(face, TopAbs_WIRE)
-    while explorer.More():
-        wires.append(edges_of(explorer.Current()))
-        explorer.Next()
+    wires = wire_edges(face)
     if len(wires) < 2:
         return []
     vertices = TopTools_IndexedMapOfShape()
