@@ -210,13 +210,20 @@ def test_a_gap_of_the_hot_part_is_not_the_morphs(bench, tmp_path):
 
 @pytest.mark.slow
 def test_a_plane_without_nodes_still_off_after_the_rounds_is_not_met(bench, tmp_path):
-    """NIST Geom (60 m across) on triangulation nodes 516 mm apart under the smooth field: plane 14 has no
-    node of its own and stays 0.059 mm off the field's estimate after 8 rounds (2.9 mm off the exact cold
-    geometry).  It was counted as met (exit 0); the miss between the nodes now counts: exit 5, named."""
+    """NIST Geom (60 m across) on triangulation nodes 516 mm apart under the smooth field: no face has a node
+    of its own, and the large planes stay off the field's estimate after the rounds of refinement.  It was
+    counted as met (exit 0); the miss between the nodes now counts: exit 5, and the face where the cold part
+    is farthest from the exact geometry is among those the report names as missed."""
+    import json
+
     run = bench.run_here(ROOT / "corpus" / "real_parts" / "Geom.stp", "tess", "smooth", tmp_path)
+    tolerance = 1e-3
+    assert run.valid and run.exact_max > tolerance
     assert run.exit_code == 5
-    assert run.message.startswith("hot2cold: tolerance 0.001 mm not met (face 14 between its nodes: ")
-    assert run.valid and run.exact_face == 14 and run.exact_max > 1.0
+    assert run.message.startswith("hot2cold: tolerance 0.001 mm not met (face ")
+    report = json.loads((tmp_path / "Geom_tess_smooth_report.json").read_text())
+    assert not report["tolerance_met"]
+    assert report["faces"][run.exact_face]["delta_between"] > tolerance
 
 
 @pytest.mark.slow
