@@ -99,7 +99,7 @@ def test_a_reprojected_curve_whose_end_parts_from_its_neighbours_is_closed_onto_
     def reproject_then_spoil(edge, face, gap, samples):
         kept = plain(edge, face, gap, samples)
         if not spoiled and kept < gap:
-            spline = repair._pcurve(edge, face)
+            spline = repair.pcurve_spline(edge, face)
             end = spline.Pole(spline.NbPoles())
             spline.SetPole(spline.NbPoles(), gp_Pnt2d(end.X() + 1e-3, end.Y()))
             BRep_Builder().UpdateEdge(edge, spline, face, BRep_Tool.Tolerance_s(edge))

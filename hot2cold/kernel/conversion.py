@@ -22,7 +22,8 @@ from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
 from OCP.BRepTools import BRepTools
 from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurface, Geom_CylindricalSurface,
-                      Geom_SphericalSurface, Geom_ToroidalSurface)
+                      Geom_Plane, Geom_SphericalSurface, Geom_ToroidalSurface)
+from OCP.Geom2d import Geom2d_BSplineCurve
 from OCP.gp import gp_Ax3, gp_Dir, gp_Vec2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID
 from OCP.TopLoc import TopLoc_Location
@@ -31,7 +32,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Shape
 from ..errors import KernelError
 from .explore import bspline_curve, bspline_surface, diagonal, edges_of, index_map, shape_map
 from .faults import describe_face, face_faults
-from .repair import face_valid, fix_faces, mend_face
+from .repair import face_valid, fix_faces, mend_face, pcurve_spline
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +75,10 @@ def _convert(shape: TopoDS_Shape, copy: TopoDS_Shape) -> TopoDS_Shape:
             surface = BRep_Tool.Surface_s(face)
             if surface.DynamicType().Name() == "Geom_OffsetSurface":
                 _tighten_offset(surface, converted_face, _OFFSET_TOLERANCE * size)
+        kept = [k for k, (face, converted_face) in enumerate(zip(faces, converted_faces))
+                if _keep_pcurves(face, converted_face, _SAME_PARAMETERS * size)]
+        if kept:
+            log.debug("faces that keep their pcurves as read: %s", kept)
         return _mend(faces, converted, converted_faces, _MEND_TOLERANCE * size)
     names, numbers = shape_map(shape, TopAbs_FACE), index_map(copy, TopAbs_FACE)
     for s, solid in enumerate(shape_map(copy, TopAbs_SOLID)):
@@ -85,6 +90,94 @@ def _convert(shape: TopoDS_Shape, copy: TopoDS_Shape) -> TopoDS_Shape:
                 raise KernelError(f"B-spline conversion of solid {s} failed at {describe_face(names[k], k)}: "
                                   f"{exc}") from exc
     raise KernelError(f"B-spline conversion of the part failed (on no face alone): {failure}") from failure
+
+
+#: Share of the part's diagonal within which a converted surface or curve is taken to keep its parameters.
+_SAME_PARAMETERS = 1e-9
+#: Parameters at which a pcurve and its edge are compared (shares of the edge's range).
+_SAMPLES = np.linspace(0.0, 1.0, 9)
+
+
+def _keep_pcurves(face, converted_face, tol: float) -> bool:
+    """Give ``converted_face`` (``face`` after ``BRepBuilderAPI_NurbsConvert``), in place, the pcurves ``face``
+    has as read wherever the conversion changed neither the surface's parameters nor the edge curve's, yet made
+    another pcurve (not the same B-spline); True if it did, and the face is still valid.
+
+    The conversion projects the converted edge curve onto the surface anew whenever it converts the edge (its
+    curve, or a face of it, is no B-spline), with ``ProjLib_ComputeApproxOnPolarSurface``.  On a B-spline
+    surface with a pole, along an edge whose curve lies a loose tolerance from its pcurve as read, that
+    projection made a pcurve of degree 8 whose poles swing over three periods of the surface and whose points
+    leave its domain: the morphed face's wire then read as a hole.  Where the parameters are kept, the pcurve
+    as read is the one the face was valid with.
+    Planes are left alone (their pcurves are projected onto the plane itself); so are pcurves that are no line
+    or B-spline (a conic's B-spline has other parameters).  ``tol`` (mm) bounds what counts as unchanged."""
+    location = TopLoc_Location()
+    surface = BRep_Tool.Surface_s(face, location)
+    if isinstance(surface, Geom_Plane):
+        return False
+    converted_surface = BRep_Tool.Surface_s(converted_face, TopLoc_Location())
+    face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
+    converted_face = TopoDS.Face_s(converted_face.Oriented(TopAbs_FORWARD))
+    was_valid, changes = None, []
+    for edge, converted_edge in zip(edges_of(face, once=True), edges_of(converted_face, once=True)):
+        if BRep_Tool.Degenerated_s(edge) or not _same_curve(edge, converted_edge, tol):
+            continue
+        uses = [TopAbs_FORWARD, TopAbs_REVERSED] if BRep_Tool.IsClosed_s(edge, face) else [TopAbs_FORWARD]
+        old = [pcurve_spline(TopoDS.Edge_s(edge.Oriented(o)), face) for o in uses]
+        new = [BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(converted_edge.Oriented(o)), converted_face, 0.0, 0.0)
+               for o in uses]
+        if any(c is None for c in old):
+            continue
+        first, last = BRep_Tool.Range_s(edge, face)
+        if BRep_Tool.Range_s(converted_edge, converted_face) != (first, last):
+            continue
+        ts = first + _SAMPLES * (last - first)
+        if not all(_on_same_points(surface, converted_surface, c, ts, tol) for c in old):
+            continue
+        if all(_identical(a, b) for a, b in zip(old, new)):
+            continue
+        if was_valid is None:
+            was_valid = face_valid(converted_face)
+        forward = TopoDS.Edge_s(converted_edge.Oriented(TopAbs_FORWARD))
+        changes.append((forward, new, old))
+        BRep_Builder().UpdateEdge(forward, *old, converted_face, BRep_Tool.Tolerance_s(converted_edge))
+    if not changes:
+        return False
+    if face_valid(converted_face) or not was_valid:
+        return True
+    for forward, new, _ in changes:     # valid as converted, invalid with the pcurves as read: undone
+        BRep_Builder().UpdateEdge(forward, *new, converted_face, BRep_Tool.Tolerance_s(forward))
+    return False
+
+
+def _same_curve(edge, converted_edge, tol: float) -> bool:
+    """Whether the converted edge has the range and, at the same parameters, the points of ``edge``."""
+    first, last = BRep_Tool.Range_s(edge)
+    if BRep_Tool.Range_s(converted_edge) != (first, last):
+        return False
+    curve, converted = BRep_Tool.Curve_s(edge, 0.0, 0.0), BRep_Tool.Curve_s(converted_edge, 0.0, 0.0)
+    if curve is None or converted is None:
+        return False
+    return all(curve.Value(t).Distance(converted.Value(t)) <= tol for t in first + _SAMPLES * (last - first))
+
+
+def _on_same_points(surface, converted_surface, pcurve, ts, tol: float) -> bool:
+    """Whether the two surfaces give the same points at ``pcurve``'s parameters ``ts``."""
+    for t in ts:
+        uv = pcurve.Value(t)
+        if surface.Value(uv.X(), uv.Y()).Distance(converted_surface.Value(uv.X(), uv.Y())) > tol:
+            return False
+    return True
+
+
+def _identical(a, b) -> bool:
+    """Whether the 2D B-splines ``a`` and ``b`` have the same degree, knots and poles (to rounding)."""
+    if not (isinstance(b, Geom2d_BSplineCurve) and a.Degree() == b.Degree() and a.NbPoles() == b.NbPoles()
+            and list(a.KnotSequence()) == list(b.KnotSequence())):
+        return False
+    poles = [(a.Pole(i), b.Pole(i)) for i in range(1, a.NbPoles() + 1)]
+    scale = 1.0 + max(abs(c) for p, _ in poles for c in (p.X(), p.Y()))
+    return all(p.Distance(q) <= 1e-12 * scale for p, q in poles)
 
 
 #: The largest edge tolerance (share of the part's diagonal) that mending a converted face may give an edge.

@@ -44,7 +44,7 @@ def face_valid(face) -> bool:
     return BRepCheck_Analyzer(face).IsValid()
 
 
-def _pcurve(edge, face) -> Geom2d_BSplineCurve | None:
+def pcurve_spline(edge, face) -> Geom2d_BSplineCurve | None:
     """The pcurve of the oriented ``edge`` on ``face`` as a new clamped B-spline over exactly the edge's range,
     with its parameters (its end poles are the pcurve's ends); None for a pcurve that is no line or B-spline
     (a conic's B-spline would have other parameters)."""
@@ -141,7 +141,7 @@ def _move_ends(forward, orientation, ends: dict, face) -> None:
     ``orientation`` to their points ``(2,)``, and store it (with the other pcurve of a seam unchanged)."""
     face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
     use = TopoDS.Edge_s(forward.Oriented(orientation))
-    spline = _pcurve(use, face)
+    spline = pcurve_spline(use, face)
     if spline is None:
         log.debug("a pcurve that is a conic keeps its ends")
         return
