@@ -162,3 +162,40 @@ def test_a_hole_touching_the_outline_keeps_its_shared_vertex_valid():
         assert "IntersectingWires" in face_faults(face)
         assert (fitted(face, bound) >= 1.0) is valid
         assert face_valid(face) is valid
+
+
+def test_a_curve_projected_onto_a_closed_surface_stays_on_its_side_of_the_seam(monkeypatch):
+    """A quarter of a sphere whose B-spline surface runs the whole turn (u from 0 to 2 pi, closed, made
+    non-periodic), its surface turned by 1e-3 rad against its edges as a morph may slide it: the edge along
+    u = 0 now lies just below u = 0, and its projection lands at u = 2 pi - 1e-3, across the seam (a tinymovr
+    face read back BadOrientationOfSubshape).  Such a projection is not taken: the curve stays where it was,
+    the tolerance covers the gap, and the face is valid."""
+    import math
+
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.Geom import Geom_SphericalSurface
+    from OCP.GeomConvert import GeomConvert
+    from OCP.gp import gp_Ax1, gp_Ax3, gp_Dir, gp_Pnt
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX
+    from OCP.TopLoc import TopLoc_Location
+    from hot2cold.kernel.conversion import to_bspline
+    from hot2cold.kernel.explore import edges_of, shape_map
+    from hot2cold.kernel.rebuild import ColdKernel
+
+    whole = GeomConvert.SurfaceToBSplineSurface_s(Geom_SphericalSurface(gp_Ax3(), 10.0))
+    shape = to_bspline(BRepBuilderAPI_MakeFace(whole, 0.0, math.pi / 2, 0.5, math.pi / 2, 1e-7).Face())
+    face = shape_map(shape, TopAbs_FACE)[0]
+    surface = BRep_Tool.Surface_s(face, TopLoc_Location())
+    assert surface.IsUClosed() and not surface.IsUPeriodic() and surface.Bounds()[1] == pytest.approx(2 * math.pi)
+    surface.Rotate(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 1e-3)
+    cold = ColdKernel(shape, [face], shape_map(shape, TopAbs_EDGE), shape_map(shape, TopAbs_VERTEX))
+    gaps = fit_tolerances(cold, reproject_above=1e-6)
+    assert gaps.max() <= 1.01 * 10.0 * 1e-3           # at most the slide: 1e-3 rad on a radius of 10
+    for edge in edges_of(face):
+        if not BRep_Tool.Degenerated_s(edge):
+            first, last = BRep_Tool.Range_s(edge, face)
+            curve = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+            assert all(-0.01 <= curve.Value(t).X() <= math.pi / 2 + 0.01 for t in np.linspace(first, last, 11))
+    assert BRepCheck_Analyzer(face).IsValid()

@@ -26,6 +26,7 @@ import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.BRepLib import BRepLib
+from OCP.BRepTools import BRepTools
 from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.Geom2dInt import Geom2dInt_GInter
 from OCP.GeomAbs import GeomAbs_BSplineCurve
@@ -68,21 +69,43 @@ def _gap(edge, face, n: int) -> float:
 
 def _reproject(edge, face, gap: float, samples: int) -> float:
     """Replace ``edge``'s curve on ``face`` by the projection of its 3D curve onto the face's surface if that
-    is nearer than ``gap`` (mm, the old curve's); the gap of the curve kept."""
+    is nearer than ``gap`` (mm, the old curve's) and lies where the old one lies in the face's parameters
+    (:func:`_slid`); the gap of the curve kept."""
     first, last = BRep_Tool.Range_s(edge, face)
     old = BRep_Tool.CurveOnSurface_s(edge, face, first, last)
     tolerance = BRep_Tool.Tolerance_s(edge)
+    u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+    reach = _SLIDE_SHARE * max(u1 - u0, v1 - v0)
     ShapeBuild_Edge().RemovePCurve(edge, face)
     if ShapeFix_Edge().FixAddPCurve(edge, face, False, tolerance):
         BRepLib.SameParameter_s(edge, tolerance)
         new = _gap(edge, face, samples)
-        if new < gap:
+        if new < gap and _slid(old, (first, last), edge, face) <= reach:
             return new
         ShapeBuild_Edge().RemovePCurve(edge, face)
     builder = BRep_Builder()
     builder.UpdateEdge(edge, old, face, tolerance)
     builder.Range(edge, face, first, last)
     return gap
+
+
+#: A curve projected again may lie at most this share of its face's extent in parameters from the old one.
+#: Where the morph slid a face's parameters against its edges, the two lie a gap's length apart; a projection
+#: onto a closed surface may land on the far side of its seam instead (a tinymovr face on a sphere-like
+#: B-spline: the curve along u = 0 projected to u = 0.15, the period's end, and its neighbour round the other
+#: way), which reads back as a face inside out.
+_SLIDE_SHARE = 0.25
+
+
+def _slid(old, old_range: tuple, edge, face, n: int = 21) -> float:
+    """Largest distance, in the face's parameters, between the curve ``old`` (over ``old_range``) and
+    ``edge``'s curve on ``face``, at ``n`` matching shares of their ranges."""
+    first, last = BRep_Tool.Range_s(edge, face)
+    new = BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 0.0)
+    shares = np.linspace(0.0, 1.0, n)
+    a = [old.Value(old_range[0] + s * (old_range[1] - old_range[0])) for s in shares]
+    b = [new.Value(first + s * (last - first)) for s in shares]
+    return max(max(abs(p.X() - q.X()), abs(p.Y() - q.Y())) for p, q in zip(a, b))
 
 
 def _on_face(edge, face) -> tuple:
