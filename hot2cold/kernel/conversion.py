@@ -7,10 +7,11 @@ the normalisation here changes that geometry in place: the part as read stays as
 a cylinder, cone, sphere or torus that runs outside the first turn of its surface (u from pi to 3 pi, or from
 -pi to pi) has its surface's frame turned to where it begins (:func:`_turn_to_face`), so that the conversion
 sees it from 0; then every surface and curve is converted, offset surfaces approximated closely
-(:func:`_tighten_offset`), and each converted face that the conversion broke while the face as read is valid is
-mended (:mod:`hot2cold.kernel.repair`) or named in a :class:`~hot2cold.errors.KernelError`.  Last, periodic
-B-splines are brought to the period that holds their face (:func:`_into_first_period`) and made non-periodic
-and clamped.
+(:func:`_tighten_offset`), the pcurves as read put back where the conversion kept the parameters of surface and
+curve yet projected them anew (:func:`_keep_pcurves`), and each converted face that the conversion broke
+while the face as read is valid is mended (:mod:`hot2cold.kernel.repair`) or named in a
+:class:`~hot2cold.errors.KernelError`.  Last, periodic B-splines are brought to the period that holds their
+face (:func:`_into_first_period`) and made non-periodic and clamped.
 """
 from __future__ import annotations
 
