@@ -112,8 +112,7 @@ def _keep_pcurves(face, converted_face, tol: float) -> bool:
     as read is the one the face was valid with.
     Planes are left alone (their pcurves are projected onto the plane itself); so are pcurves that are no line
     or B-spline (a conic's B-spline has other parameters).  ``tol`` (mm) bounds what counts as unchanged."""
-    location = TopLoc_Location()
-    surface = BRep_Tool.Surface_s(face, location)
+    surface = BRep_Tool.Surface_s(face, TopLoc_Location())
     if isinstance(surface, Geom_Plane):
         return False
     converted_surface = BRep_Tool.Surface_s(converted_face, TopLoc_Location())
@@ -123,15 +122,15 @@ def _keep_pcurves(face, converted_face, tol: float) -> bool:
     for edge, converted_edge in zip(edges_of(face, once=True), edges_of(converted_face, once=True)):
         if BRep_Tool.Degenerated_s(edge) or not _same_curve(edge, converted_edge, tol):
             continue
-        uses = [TopAbs_FORWARD, TopAbs_REVERSED] if BRep_Tool.IsClosed_s(edge, face) else [TopAbs_FORWARD]
-        old = [pcurve_spline(TopoDS.Edge_s(edge.Oriented(o)), face) for o in uses]
-        new = [BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(converted_edge.Oriented(o)), converted_face, 0.0, 0.0)
-               for o in uses]
-        if any(c is None for c in old):
-            continue
         first, last = BRep_Tool.Range_s(edge, face)
         if BRep_Tool.Range_s(converted_edge, converted_face) != (first, last):
             continue
+        uses = [TopAbs_FORWARD, TopAbs_REVERSED] if BRep_Tool.IsClosed_s(edge, face) else [TopAbs_FORWARD]
+        old = [pcurve_spline(TopoDS.Edge_s(edge.Oriented(o)), face) for o in uses]
+        if any(c is None for c in old):
+            continue
+        new = [BRep_Tool.CurveOnSurface_s(TopoDS.Edge_s(converted_edge.Oriented(o)), converted_face, 0.0, 0.0)
+               for o in uses]
         ts = first + _SAMPLES * (last - first)
         if not all(_on_same_points(surface, converted_surface, c, ts, tol) for c in old):
             continue
