@@ -9,7 +9,8 @@ Three uses share the monomials, the scaling of the offsets and the linear least 
   eq. 40-53): the value at a point of a linear fit over a neighbourhood, in offsets from its centroid, plus a
   quadratic correction and the trust in it;
 * :func:`scatter` (for the tolerance of :mod:`hot2cold.pipeline.refine`): how far a field's nodes scatter about
-  a smooth field, from leave-one-out predictions of quadratics in the surface's tangent plane.
+  a smooth field, from leave-one-out predictions of quadratics in the surface's tangent plane (with
+  terms across it).
 
 The monomials, numbered from 0, are ``1, x, y, z`` (degree 1) and then ``x x, y y, z z, x y, x z, y z``
 (degree 2).  Offsets are scaled by each neighbourhood's largest offset component, so the columns are of order
@@ -238,13 +239,16 @@ def scatter(points: np.ndarray, values: np.ndarray, groups: list[np.ndarray] | N
     neighbourhood that reached across a thin wall would see the field's change through the wall as scatter);
     None: all points are one group.  In each group of more than ``neighbours`` points, at a seeded random
     share of ``samples`` of them, the value is predicted from the ``neighbours`` nearest other points of the
-    group by a least-squares quadratic in the two directions of their tangent plane (the two largest
-    principal directions of their offsets), leaving the point itself out.  A smooth field is a smooth function
-    of the surface's coordinates, so the prediction misses it only by its third-order terms over the
-    neighbourhood; noise it misses by the point's own noise plus the prediction's, ``r = e_0 - a . e``, whose
-    variance is ``sigma^2 (1 + |a|^2)`` per component with ``a`` the prediction's weights.  The estimate is the
-    median of ``|r|^2 / (1 + |a|^2)`` over the points, divided by the median of a chi-square with three degrees
-    of freedom: robust to the points where the field has a kink (a clamped root) or the surface a crease, as
+    group by least squares, leaving the point itself out: a quadratic in the two directions of their tangent
+    plane (the two largest principal directions of their offsets, ``s`` and ``t``), plus the offset ``n`` across
+    it and its products ``s n``, ``t n``.  A smooth field is a smooth function of the surface's coordinates, so
+    the quadratic misses it only by its third-order terms over the neighbourhood; the terms in ``n`` take the
+    field's change through the part where one face's neighbourhood holds nodes of both sides of a thin wall
+    (a blade's face wrapped round its leading edge), which the quadratic alone took as scatter.  Noise it
+    misses by the point's own noise plus the prediction's, ``r = e_0 - a . e``, whose variance is
+    ``sigma^2 (1 + |a|^2)`` per component with ``a`` the prediction's weights.  The estimate is the median of
+    ``|r|^2 / (1 + |a|^2)`` over the points, divided by the median of a chi-square with three degrees of
+    freedom: robust to the points where the field has a kink (a clamped root) or the surface a crease, as
     long as those are fewer than half.  0 when no group has more than ``neighbours`` points.
     """
     points = np.asarray(points, float)
@@ -270,10 +274,10 @@ def _left_out(points: np.ndarray, values: np.ndarray, at: np.ndarray, neighbours
     offsets = points[idx] - points[at][:, None, :]                              # (c, k, 3)
     centred = offsets - offsets.mean(axis=1, keepdims=True)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)                      # (c, 3, 3)
-    st = np.einsum("ckj,caj->cka", offsets, vt[:, :2])                          # (c, k, 2), the point at 0
-    st = st / np.maximum(np.abs(st).max(axis=(1, 2)), 1e-300)[:, None, None]
-    s, t = st[..., 0], st[..., 1]
-    features = np.stack([np.ones_like(s), s, t, s * s, s * t, t * t], axis=-1)  # (c, k, 6)
+    stn = np.einsum("ckj,caj->cka", offsets, vt)                                # (c, k, 3), the point at 0
+    stn = stn / np.maximum(np.abs(stn[..., :2]).max(axis=(1, 2)), 1e-300)[:, None, None]
+    s, t, n = stn[..., 0], stn[..., 1], stn[..., 2]
+    features = np.stack([np.ones_like(s), s, t, s * s, s * t, t * t, n, s * n, t * n], axis=-1)  # (c, k, 9)
     weights = np.linalg.pinv(features, rcond=NODE_RCOND)[:, 0, :]              # (c, k): the value at the point
     r = values[at] - np.einsum("ck,ckj->cj", weights, values[idx])
     return np.sum(r * r, axis=1) / (1.0 + np.sum(weights * weights, axis=1))
