@@ -250,6 +250,8 @@ class Result:
     exit_code: int | None = None
     message: str = ""
     met: bool | None = None
+    state: str = ""                         # the report's verdict: met, partly measured, not met
+    measured: float | None = None           # the share of the part's area it measured
     delta_nodes: float | None = None        # the tool's largest error at the nodes, mm
     delta_between: float | None = None      # ... between them
     allowance: float | None = None          # the tool's allowance for scatter, mm
@@ -334,7 +336,13 @@ def run_case(name: str, workdir: Path) -> Result:
         result.delta_nodes = max(data.get("delta_max") or 0.0, edge_max)
         result.delta_between = data.get("delta_between")
         result.allowance = data.get("allowance")
-        result.unmeasured = list(data.get("unsupported_faces", []))
+        # the faces the tool does not vouch for: those it names as unmeasured, and on a run it calls partly
+        # measured, every face with any share unmeasured
+        partly = (data.get("verdict") or {}).get("state") not in (None, "met")
+        result.unmeasured = sorted(set(data.get("unsupported_faces", [])) | {
+            f["index"] for f in data.get("faces", []) if partly and (f.get("unsupported") or 0.0) > 0.0})
+        result.state = (data.get("verdict") or {}).get("state", "")
+        result.measured = (data.get("verdict") or {}).get("measured")
     if result.exit_code not in rp.WRITTEN or not cold_path.exists():
         return result
     cold = read_step(cold_path)
@@ -369,7 +377,9 @@ def table(results: list[Result]) -> str:
              "faces | exact, all | limit | silent miss | s |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in results:
-        verdict = {True: "met", False: "not met", None: "-"}[r.met]
+        verdict = r.state or {True: "met", False: "not met", None: "-"}[r.met]
+        if r.measured is not None and r.measured < 0.995:
+            verdict += f" ({100 * r.measured:.0f} % measured)"
         lines.append(f"| {r.case} | {r.nodes} ({r.volume_nodes}) | {r.exit_code} | {verdict} | "
                      f"{_mm(r.delta_nodes)} | {_mm(r.delta_between)} | "
                      f"{', '.join(map(str, r.unmeasured)) or '-'} | {_mm(r.exact_measured)} | "

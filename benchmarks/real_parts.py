@@ -105,7 +105,10 @@ class Run:
     exact_face: int | None = None       # the face of exact_max
     samples: int | None = None
     delta_max: float | None = None      # mm, the report's, at the nodes
-    unmeasured: list[int] | None = None  # the report's unsupported_faces: faces the nodes do not reach
+    unmeasured: list[int] | None = None  # faces the report does not vouch for: its unsupported_faces, and on
+    #                                     a run it calls partly measured every face with a share unmeasured
+    verdict: str | None = None          # the report's verdict: met, partly measured, not met
+    measured: float | None = None       # the share of the part's area the report vouches for
     kinks: int | None = None            # the report's tangent edges the morph kinked (its g1 list)
     kink_before: float | None = None    # deg, the largest angle added to a hot one along them before G1
     kink_max: float | None = None       # deg, the largest angle added to a hot one along them after G1
@@ -339,6 +342,11 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     if report_path.exists():
         data = json.loads(report_path.read_text())
         run.delta_max, run.unmeasured = data.get("delta_max"), data.get("unsupported_faces")
+        run.verdict = (data.get("verdict") or {}).get("state")
+        run.measured = (data.get("verdict") or {}).get("measured")
+        if run.verdict not in (None, "met"):     # it vouches for none of a face with any share unmeasured
+            run.unmeasured = sorted(set(run.unmeasured or []) | {
+                f["index"] for f in data.get("faces", []) if (f.get("unsupported") or 0.0) > 0.0})
         added = [g["kink_after_max"] - g["hot_angle_max"] for g in data.get("g1", [])]
         run.kinks, run.kink_max = len(added), max(added, default=0.0)
         run.kink_before = max((g["kink_before_max"] - g["hot_angle_max"] for g in data.get("g1", [])), default=0.0)
@@ -443,7 +451,7 @@ def _faces(faces: list[int], most: int = 4) -> str:
 def scoreboard(runs: list[Run], width: int = 90) -> str:
     """The table of ``runs`` and the summary line."""
     head = ("part", "CAD system", "faces", "nodes", "field", "exit", "message", "time s", "peak MB", "valid",
-            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "not measured",
+            "free edges", "faces kept", "exact max mm", "worst face", "Δmax nodes mm", "verdict", "not measured",
             "kinked edges", f"> {KINK_LIMIT:g}° after G1", "largest kink added ° before G1", "after",
             "G2 edges", f"jump > {100 * G2_LIMIT:g} %", "largest jump %")
     rows = []
@@ -456,6 +464,8 @@ def scoreboard(runs: list[Run], width: int = 90) -> str:
                      _num(r.valid, ""), _num(r.free_edges, "d"),
                      "-" if r.faces_cold is None else "yes" if r.faces_cold == r.faces else f"{r.faces_cold}",
                      _num(r.exact_max, ".2e"), _num(r.exact_face, "d"), _num(r.delta_max, ".2e"),
+                     (r.verdict or "-") + ("" if r.measured is None or r.measured >= 0.995
+                                           else f" ({100 * r.measured:.0f} %)"),
                      "-" if r.unmeasured is None else _faces(r.unmeasured), _num(r.kinks, "d"),
                      _num(r.kinks_over, "d"), _num(r.kink_before, ".2g"), _num(r.kink_max, ".2g"),
                      _num(r.g2_edges, "d"), _num(r.g2_over, "d"),

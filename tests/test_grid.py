@@ -133,3 +133,20 @@ def test_bend_parameters_blockwise_as_at_once(monkeypatch, rational):
     for a, b in zip(bend_parameters(surface, box, 0.5), whole):
         np.testing.assert_array_equal(a, b)
     assert len(calls) > 3
+
+
+def test_a_grid_point_is_vouched_for_only_where_the_nodes_tell_it_is_within_the_limit():
+    """Near the nodes the error is at most ``off`` plus the larger of the slack and the uncertainty: a point
+    is vouched for where that is within the limit; out of the nodes' reach it is not at all."""
+    from hot2cold.pipeline.checks import FaceGrid
+
+    n = 5
+    grid = FaceGrid(np.zeros((n, 2)), np.zeros((n, 3)), np.zeros((n, 3)),
+                    slack=np.array([0.0, 0.0, 0.0, 6e-4, 0.0]),
+                    near=np.array([True, True, True, True, False]),
+                    node_distance=np.array([1.0, 1.0, 1.0, 1.0, 9.0]), support=2.0,
+                    uncertainty=np.array([1e-4, 2e-3, 1e-4, 1e-4, 0.0]))
+    off = np.array([5e-4, 5e-4, 3e-3, 5e-4, 0.0])
+    # within; may be beyond (uncertain estimate); beyond; may be beyond (the estimate misses its nodes); far
+    assert grid.unmeasured(off, 1e-3).tolist() == [False, True, True, True, True]
+    assert not grid.unmeasured(off, np.inf)[:4].any()

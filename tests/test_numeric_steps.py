@@ -346,3 +346,27 @@ def test_closing_pairs_misses_no_pair_of_the_whole_set():
         cold = hot + RNG.normal(0, 1.0, (15, 1, 3)).repeat(40, axis=1).reshape(-1, 3)
         if _brute_closing(hot, cold, 1.0):
             assert closing_pairs(hot, cold, 1.0) > 0
+
+
+def test_the_left_out_estimate_tells_how_well_the_nodes_know_the_field():
+    """Left out in turn, nodes on a smooth field are predicted by the others to within the estimate's
+    truncation; across a thermal front narrower than the nodes' spacing they are not, by more than the
+    estimate over all of them misses them (the slack of the checks): the left-out miss is what the nodes do
+    not tell between them."""
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(0.0, 40.0, (3000, 2))
+    points = np.column_stack([uv, 0.01 * uv[:, 0] ** 2])              # a curved sheet, nodes ~0.7 mm apart
+    rows = np.arange(0, 3000, 7)
+
+    quadratic = np.column_stack([1e-3 * points[:, 0] ** 2, 2e-3 * points[:, 1],
+                                 1e-4 * points[:, 0] * points[:, 1]])
+    smooth = FieldEstimator(points, quadratic, 20)
+    assert np.abs(smooth.left_out(rows) - quadratic[rows]).max() < 1e-5           # 1 % of a 1e-3 mm tolerance
+
+    front = np.column_stack([0.01 * np.tanh((points[:, 1] - 20.0) / 0.3), np.zeros(3000), np.zeros(3000)])
+    sharp = FieldEstimator(points, front, 20)
+    at_front = rows[np.abs(points[rows, 1] - 20.0) < 0.5]
+    left_out = np.linalg.norm(sharp.left_out(at_front) - front[at_front], axis=1)
+    fitted = np.linalg.norm(sharp(points[at_front]) - front[at_front], axis=1)
+    assert left_out.max() > 1e-3                                       # a tolerance of 1e-3 mm is not told
+    assert left_out.max() >= fitted.max()

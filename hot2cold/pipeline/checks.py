@@ -366,10 +366,16 @@ class ColdCheck:
         from the nodes the estimate extrapolates (0.096 mm off in the middle of a 150 mm plane of the vise
         whose nodes lie at its corners, where the cold face was 1.3e-3 mm off the exact field); there it
         only bounds how far a face may wander (``FieldScale.between_bound``).
+    unmeasured : (n_faces,) float array, per face the share (0 to 1) of its grid the check does not measure
+        against the tolerance (:meth:`FaceGrid.unmeasured`; NaN for an empty grid).
+    uncertain : (n_faces,) float array, the share of it that is near the nodes, where the nodes do not tell
+        the field to within the tolerance.
     """
 
     problems: dict[int, list[str]]
     between: np.ndarray
+    unmeasured: np.ndarray | None = None
+    uncertain: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,6 +400,13 @@ class FaceGrid:
         ``_SLACK_NODES`` nodes at the most (0 where not ``near``): where
         the field has a kink the local fits cannot follow (next to a clamped face) or scatters, the estimate
         between the nodes is no better than that.
+    uncertainty : (m,) float array or None, how far (mm) the estimate may be off the field there: the largest
+        miss of the estimate over the other nodes at each of the ``_SLACK_NODES`` nearest nodes, left out in
+        turn (:meth:`~hot2cold.pipeline.artificial.FieldEstimator.left_out`); 0 where not ``near`` and where
+        the field's elements tell it.  The slack is the estimate's miss at nodes it was fitted to, and bounds
+        the error between the nodes from below; this bounds it from above, at a node's spacing from the others
+        (a sharp thermal front across a thin blade's edge: the estimate 5e-3 mm off the field, its misses at
+        the nodes it holds 5e-4).  None: zeros.
     """
 
     uv: np.ndarray
@@ -403,11 +416,26 @@ class FaceGrid:
     near: np.ndarray
     node_distance: np.ndarray
     support: float = np.inf
+    uncertainty: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.uncertainty is None:
+            object.__setattr__(self, "uncertainty", np.zeros(len(self.uv)))
 
     def take(self, keep: np.ndarray) -> FaceGrid:
         """The grid points ``keep`` (a mask or indices) only."""
         return FaceGrid(self.uv[keep], self.hot[keep], self.expected[keep], self.slack[keep], self.near[keep],
-                        self.node_distance[keep], self.support)
+                        self.node_distance[keep], self.support, self.uncertainty[keep])
+
+    def unmeasured(self, off: np.ndarray, limit: float) -> np.ndarray:
+        """Which points ``(m,)`` bool the grid does not vouch for as within ``limit`` (mm) when the cold face is
+        ``off (m,)`` mm from :attr:`expected`: those out of the nodes' reach (:attr:`unsupported`), and those
+        near them where the error may exceed the limit (``off`` plus the larger of the slack and the
+        uncertainty): the nodes do not tell that the cold face is within it there.  Where the refinement
+        measured a face between its nodes, a miss beyond doubt counts against the tolerance there
+        (:meth:`~hot2cold.pipeline.report.Report.misses`); here it is only not vouched for."""
+        far = self.node_distance > self.support
+        return far | (self.near & (off + np.maximum(self.slack, self.uncertainty) > limit))
 
     @property
     def unsupported(self) -> float:
@@ -453,6 +481,7 @@ class _FaceNodes:
         self._neighbours = neighbours
         self._local = None
         self._misses = np.full(len(self.nodes), np.nan)
+        self._left_out = np.full(len(self.nodes), np.nan)
 
     @property
     def local(self):
@@ -473,6 +502,19 @@ class _FaceNodes:
         # the estimate's misses at those nodes only (a face's grid is sparser than its nodes)
         asked, at = np.unique(closest, return_inverse=True)
         return self.misses(asked)[at.reshape(closest.shape)].max(axis=1)
+
+    def uncertainty(self, points: np.ndarray) -> np.ndarray:
+        """The uncertainty ``(m,)`` (mm) of the estimate at ``points (m, 3)`` near the nodes: the largest miss of
+        :attr:`local` at their ``_SLACK_NODES`` nearest nodes, each left out of it (:attr:`FaceGrid.uncertainty`)."""
+        if not len(points):
+            return np.zeros(0)
+        closest = self.tree.query(points, k=min(_SLACK_NODES, len(self.nodes)), workers=-1)[1]
+        closest = closest.reshape(len(points), -1)
+        asked, at = np.unique(closest, return_inverse=True)
+        new = asked[np.isnan(self._left_out[asked])]
+        if len(new):
+            self._left_out[new] = np.linalg.norm(self.local.left_out(new) - self._displacements[new], axis=1)
+        return self._left_out[asked][at.reshape(closest.shape)].max(axis=1)
 
     def misses(self, asked: np.ndarray) -> np.ndarray:
         """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``)."""
@@ -542,6 +584,7 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
         uv = face_grid(face, spacing, projector)
         hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
         expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
+        uncertainty = np.zeros(len(uv))
         node_distance = np.full(len(uv), np.inf)
         own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
         mine = face_nodes.of(part, face)
@@ -553,13 +596,15 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
                 own = near
                 expected[near] += mine.local(hot[near])
                 slack[near] = mine.slack(hot[near]) if with_slack else np.nan
+                uncertainty[near] = mine.uncertainty(hot[near]) if with_slack else np.nan
         if (~own).any():
             expected[~own] += estimator(hot[~own])
         if elements is not None and len(uv):
             on, disp, slack_on = elements(hot)
             expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
+            uncertainty[on] = slack_on
         support = max(reach, overall) if np.isfinite(reach) else overall
-        return FaceGrid(uv, hot, expected, slack, near, node_distance, support)
+        return FaceGrid(uv, hot, expected, slack, near, node_distance, support, uncertainty)
 
     chosen = part.faces if faces is None else [part.faces[k] for k in faces]
     mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
@@ -572,9 +617,11 @@ def with_slack(part: Part, grids: list[FaceGrid], face_nodes: FaceNodes, threads
     def fill(k: int) -> FaceGrid:
         grid = grids[k]
         missing = np.isnan(grid.slack)
-        slack = grid.slack.copy()
-        slack[missing] = face_nodes.of(part, part.faces[k]).slack(grid.hot[missing])
-        return replace(grid, slack=slack)
+        slack, uncertainty = grid.slack.copy(), grid.uncertainty.copy()
+        nodes = face_nodes.of(part, part.faces[k])
+        slack[missing] = nodes.slack(grid.hot[missing])
+        uncertainty[missing] = nodes.uncertainty(grid.hot[missing])
+        return replace(grid, slack=slack, uncertainty=uncertainty)
 
     todo = [k for k, grid in enumerate(grids) if np.isnan(grid.slack).any()]
     out = list(grids)
@@ -650,7 +697,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
 
 def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,
                hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale,
-               grids: list[FaceGrid]) -> ColdCheck:
+               grids: list[FaceGrid], limit: float = np.inf) -> ColdCheck:
     """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
     solid: turned inside out (its volume changed sign), its volume changed by more than the field's strain
     allows (``scale.volume_bound``), a face folded over (somewhere on a grid over its trimmed domain the
@@ -660,7 +707,8 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     ``scale.between_bound`` from where the field's local estimate puts it: the nodes say where the part goes,
     and a face that wanders off between them is wrong however close it passes the nodes), or crossing itself.
     ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid; ``grids`` are the
-    :func:`face_grids` of ``part``.
+    :func:`face_grids` of ``part``; ``limit`` (mm), the tolerance plus the field's scatter allowance, against
+    which the share of each face's grid left unmeasured is found (:meth:`FaceGrid.unmeasured`).
 
     The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
     1 to 3 s on the bundled real parts, so it is run only where a gap of the part may have closed: two
@@ -688,6 +736,7 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     hot_points, cold_points = [], []
     farthest = (0.0, -1)
     between = np.full(len(part.faces), np.nan)
+    unmeasured, uncertain = np.full(len(part.faces), np.nan), np.full(len(part.faces), np.nan)
     for face, fm, grid in zip(part.faces, face_morphs, grids):
         uv = grid.uv
         (hot, hot_n), (cold, cold_n) = _points_and_normals(face.surface, fm.surface, uv)
@@ -697,6 +746,9 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
             off, k = _between(fm, grid.expected, uv, projector.face_box(face.index))
             if grid.near.any():
                 between[face.index] = float(np.maximum(off[grid.near] - grid.slack[grid.near], 0.0).max())
+            left = grid.unmeasured(off, limit)
+            unmeasured[face.index] = float(np.mean(left))
+            uncertain[face.index] = float(np.mean(left & grid.near))
             if off[k] > scale.between_bound:
                 problems.setdefault(face.solid, []).append(
                     f"leaves the field between the nodes: face {face.index} is {off[k]:.4g} mm from where the "
@@ -731,7 +783,12 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     for s in sorted(problems):
         for text in problems[s]:
             log.warning("cold solid %d %s", s, text)
-    return ColdCheck(problems, between)
+    if np.nansum(uncertain) > 0:
+        k = int(np.nanargmax(uncertain))
+        log.info("between the nodes of %d face(s) the field's estimate may be off by more than the tolerance "
+                 "allows: unmeasured there (most on face %d, %.2g %% of it)", int(np.sum(uncertain > 0)), k,
+                 100 * uncertain[k])
+    return ColdCheck(problems, between, unmeasured, uncertain)
 
 
 def _between(fm: FaceMorph, expected: np.ndarray, uv: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, int]:

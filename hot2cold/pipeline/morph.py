@@ -918,7 +918,8 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     cold_checks = check_solids(cold.shape)
     stages.lap("sew")
     stages.begin("check")
-    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, grids)
+    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, grids,
+                            (settings.tolerance if settings.tolerance is not None else np.inf) + allowance)
     problems = cold_check.problems
     cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
@@ -929,7 +930,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
                          [f.surface for f in face_morphs], [e.curve for e in edge_morphs], settings.threads)
     stages.lap("report")
     report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between,
-                                                np.array([g.unsupported for g in grids]),
+                                                cold_check.unmeasured,
                                                 np.array([g.farthest_node for g in grids])), errors,
                           hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
                           timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
