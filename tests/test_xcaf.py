@@ -142,7 +142,9 @@ def test_report_names_each_face(cli_run):
     planes = {n for k, n in enumerate(names[6:], 6) if k not in (6, 9)}
     assert planes <= {"plane x = 55", "plane x = 65", "plane y = -10", "plane y = 10", "plane z = -15",
                       "plane z = 15"} and len(planes) == 4, names
-    rows = [line.split() for line in table.splitlines()[1:13]]
+    lines = table.splitlines()
+    assert lines[0] == report["verdict"]["text"] and lines[1].split()[0] == "face"      # the verdict, the header
+    rows = [line.split() for line in lines[2:14]]
     assert [" ".join(r[5:]) for r in rows] == names
 
 

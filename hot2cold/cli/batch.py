@@ -309,9 +309,13 @@ def done_before(job: Job, cache: dict | None = None) -> dict | None:
 # Running
 # --------------------------------------------------------------------------------------------------------
 def _result(job: Job, status: str, exit_code: int | None, message: str = "", delta_max: float | None = None,
-            seconds: float = 0.0, **more) -> dict:
-    return {"name": job.name, "status": status, "exit_code": exit_code, "message": message,
-            "delta_max": delta_max, "seconds": round(seconds, 3), "hot": str(job.hot), "field": str(job.field),
+            seconds: float = 0.0, verdict: str | None = None, verdict_text: str | None = None, **more) -> dict:
+    """A job's result: ``verdict`` is its report's verdict state (:class:`~hot2cold.pipeline.report.VerdictState`'s
+    value: met, partly measured, NOT met, no tolerance; None where no part was made) and ``verdict_text`` the
+    report's first line."""
+    return {"name": job.name, "status": status, "verdict": verdict, "exit_code": exit_code, "message": message,
+            "verdict_text": verdict_text, "delta_max": delta_max, "seconds": round(seconds, 3), "hot": str(job.hot),
+            "field": str(job.field),
             "output": str(job.output), "report": None if job.report is None else str(job.report), **more}
 
 
@@ -359,11 +363,15 @@ def run_job(job: Job) -> dict:
             pass
         missed = tolerance_missed(result)
         status, code = ("tolerance-missed", 5) if missed else ("ok", 0)
+        verdict = result.report.verdict
         out = _result(job, status, code, missed or "", result.report.delta_max, time.perf_counter() - start,
+                      verdict=verdict.state.value, verdict_text=verdict.text,
                       cpu_seconds=round(time.process_time() - cpu, 3), **where)
         if inputs is not None:
             made = {what: _digest(path) for what, path in job.outputs()[:-1]}
-            write_json({"inputs": inputs, "outputs": made, "paths": {w: str(p) for w, p in job.outputs()},
+            # the verdict first: the record beside the cold STEP is what a job without a report leaves there
+            write_json({"verdict": verdict.to_dict(), "inputs": inputs, "outputs": made,
+                        "paths": {w: str(p) for w, p in job.outputs()},
                         **{k: out[k] for k in ("status", "message", "delta_max", "seconds")},
                         "written": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, job.record)
         log.info("job %s: %s in %.1f s", job.name, status, out["seconds"])
@@ -380,8 +388,10 @@ def run_job(job: Job) -> dict:
 
 def skipped(job: Job, record: dict, seconds: float = 0.0) -> dict:
     """The result of a job left alone because :func:`done_before` gave its ``record``."""
+    verdict = record.get("verdict") if isinstance(record.get("verdict"), dict) else {}
     return _result(job, "skipped", 0, f"done before ({record.get('status')}); inputs unchanged",
-                   record.get("delta_max"), seconds, previous=record.get("status"))
+                   record.get("delta_max"), seconds, previous=record.get("status"),
+                   verdict=verdict.get("state"), verdict_text=verdict.get("text"))
 
 
 def run_jobs(jobs: list[Job], *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
@@ -528,13 +538,16 @@ def summary(jobs_file: str | os.PathLike, jobs: list[Job], results: list[dict], 
 
 
 def summary_table(data: dict) -> str:
-    """The summary as a text table: job, status, Δmax, time, message."""
+    """The summary as a text table: job, status, verdict (met, partly measured, NOT met, no tolerance; "-"
+    where no part was made), Δmax, time, message."""
     rows = data["jobs"]
     width = max([3] + [len(r["name"]) for r in rows])
-    lines = [f"{'job':<{width}}  {'status':<16} {'Δmax [mm]':>10} {'time [s]':>9}  message"]
+    lines = [f"{'job':<{width}}  {'status':<16} {'verdict':<15} {'Δmax [mm]':>10} {'time [s]':>9}  message"]
     for r in rows:
         delta = "-" if r["delta_max"] is None else f"{r['delta_max']:.3g}"
-        lines.append(f"{r['name']:<{width}}  {r['status']:<16} {delta:>10} {r['seconds']:>9.1f}  {r['message']}")
+        verdict = r.get("verdict") or "-"
+        lines.append(f"{r['name']:<{width}}  {r['status']:<16} {verdict:<15} {delta:>10} {r['seconds']:>9.1f}  "
+                     f"{r['message']}")
     counts = ", ".join(f"{n} {s}" for s, n in data["counts"].items())
     wall = f"; {data['wall_seconds']:.1f} s wall" if "wall_seconds" in data else ""
     lines.append(f"{len(rows)} jobs: {counts}{wall}")

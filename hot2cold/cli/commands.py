@@ -231,17 +231,18 @@ def _morph(args) -> int:
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
-        print(result.report.table())
+        print(result.report.table())    # the verdict its first line
     written = args.written = []         # for the messages of a failure or an interruption from here on
+    what = {path: name for name, path in _outputs(args)}
     try:
         for path in write_cold(result, args.output, args.report):   # report, check, STEP; atomic each
             written.append(path)
-        if not args.quiet:
-            print(f"wrote {args.output}")
+            if not args.quiet:
+                print(_wrote(path, what.get(path, "")))
         for path in _write_exports(args, result):
             written.append(path)
             if not args.quiet:
-                print(f"wrote {path}")
+                print(_wrote(path, what.get(path, "")))
     except OutputError as exc:
         raise OutputError(f"{exc} ({', '.join(map(str, written)) or 'nothing'} written)") from exc
     missed = tolerance_missed(result)
@@ -249,6 +250,21 @@ def _morph(args) -> int:
         print(f"hot2cold: {missed}", file=sys.stderr)
         return 5
     return 0
+
+
+#: What each file ``hot2cold morph`` writes is, by the name :func:`_outputs` gives it.
+_WHAT = {"output": "the cold part (STEP; read back and checked as valid closed solids)",
+         "report": "the report (JSON; the verdict first, then every figure printed above)",
+         "--html": "the report page (HTML, the verdict first, a 3D view; opens in a browser, offline)",
+         "--vtu": "the FE nodes with their displacement, error and role (VTU, for ParaView)",
+         "--vtu surface": "the cold surface with its displacement (VTU, for ParaView)",
+         "--stl": "the cold part as triangles (binary STL, mm)",
+         "--glb": "the cold part for glTF viewers (binary glTF, metres, Y up)"}
+
+
+def _wrote(path: Path, what: str) -> str:
+    """The line naming a file written and what it is."""
+    return f"wrote {path}: {_WHAT[what]}" if what in _WHAT else f"wrote {path}"
 
 
 def _no_solid(path: Path, exc: StepReadError) -> StepReadError:

@@ -31,7 +31,7 @@ def write_json(data: dict, path: str | os.PathLike) -> None:
     """Write ``data`` as indented JSON to ``path``, whole or not at all."""
     def write(tmp: str) -> None:
         with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2)
+            json.dump(data, fh, indent=2, ensure_ascii=False)    # the verdict as the report writes it
             fh.write("\n")
 
     write_atomically([(Path(path), write)])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field
+from enum import Enum
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,7 +18,7 @@ from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..core.footpoint import curve_distances, project_to_surface
-from ..kernel.validity import SolidCheck
+from ..kernel.validity import SolidCheck, face_areas
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
 from ..core.threads import map_threads
@@ -38,7 +39,9 @@ class FaceReport:
     the larger: ``FaceGrid.support``) from the nodes of the face, its edges and vertices, where nothing
     measures the face (its shape there comes from its edges and the field's estimate), and
     ``farthest_node`` the largest such distance (mm); NaN where not checked.  ``name``: the face's name in the hot
-    STEP, else one from its surface kind and place (:meth:`~hot2cold.core.model.Part.face_title`)."""
+    STEP, else one from its surface kind and place (:meth:`~hot2cold.core.model.Part.face_title`).  ``area``:
+    the hot face's trimmed area (mm²; NaN where not known), what weighs ``unsupported`` in the share of the
+    part's area measured (:attr:`Verdict.measured`)."""
 
     index: int
     solid: int
@@ -56,6 +59,7 @@ class FaceReport:
     unsupported: float = float("nan")
     farthest_node: float = float("nan")
     name: str = ""
+    area: float = float("nan")
 
 
 #: A face is named as not told by its nodes when more than this share of its grid lies out of their reach.
@@ -92,6 +96,132 @@ class SolidReport:
     @property
     def closed(self) -> bool:
         return self.free_edges == 0
+
+
+class VerdictState(Enum):
+    """What a morph's verdict says of the tolerance: ``MET`` (at every node and between them where measured,
+    and the part measured all over: no face more than :data:`UNSUPPORTED_SHARE` unmeasured,
+    :attr:`FaceReport.unsupported`), ``PARTLY_MEASURED`` (met where measured, but some face more than that
+    unmeasured: nothing says how far the part is off there), ``NOT_MET`` (:attr:`Report.tolerance_met` False:
+    exit code 5) and ``NO_TOLERANCE`` (none was set).  The value is the word the report shows."""
+
+    MET = "met"
+    PARTLY_MEASURED = "partly measured"
+    NOT_MET = "NOT met"
+    NO_TOLERANCE = "no tolerance"
+
+    @property
+    def words(self) -> str:
+        """How the verdict's sentence says it after the tolerance."""
+        return {VerdictState.PARTLY_MEASURED: "met where measured, PARTLY measured",
+                VerdictState.NO_TOLERANCE: "no tolerance set"}.get(self, self.value)
+
+    @property
+    def tone(self) -> Tone:
+        """How a view colours it: only a met, fully measured part is good (green)."""
+        return {VerdictState.MET: Tone.GOOD, VerdictState.PARTLY_MEASURED: Tone.WARNING,
+                VerdictState.NOT_MET: Tone.BAD, VerdictState.NO_TOLERANCE: Tone.NEUTRAL}[self]
+
+
+class Tone(Enum):
+    """The role of a verdict's colour in a view: green, amber, red, or none."""
+
+    GOOD = "good"
+    WARNING = "warning"
+    BAD = "bad"
+    NEUTRAL = "neutral"
+
+
+class Feature(Enum):
+    """What kind of place of the part an error is found at."""
+
+    FACE = "face"
+    EDGE = "edge"
+    VERTEX = "vertex"
+
+
+@dataclass(frozen=True)
+class Place:
+    """A face, an edge or a vertex of the part (``index`` None: one not named, as the vertices' largest error
+    is reported over all of them)."""
+
+    feature: Feature
+    index: int | None = None
+
+    def __str__(self) -> str:
+        return f"{self.feature.value} {self.index}" if self.index is not None else f"a {self.feature.value}"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The one verdict of a morph, as the command's first line, the HTML page's header and the JSON's
+    ``verdict`` give it (:attr:`Report.verdict`).
+
+    ``state``: :class:`VerdictState`; ``tolerance`` and ``limit`` (the tolerance plus the field's scatter
+    allowance), mm, None when no tolerance was set; ``at_nodes``: the largest error at the nodes (mm, eq. 21:
+    face, edge and vertex nodes; NaN where no node is used) and ``at_nodes_where`` its place;
+    ``between``: the largest error found between the nodes (mm: the cold faces against the field's local
+    estimate on a grid over every face, and what the refinement measured there on faces and edges their nodes
+    do not determine; NaN where nothing was measured) and ``between_where``, the largest of those the tolerance
+    counts or within its limit (:meth:`Report._between_figures`); ``uncounted`` and ``uncounted_where``: a
+    larger one beyond the limit that the tolerance does not count (the cold check's grid against the field's
+    local estimate; NaN and None where there is none); ``measured``: the share (0 to 1) of the part's area
+    measured (1 less the area-weighted :attr:`FaceReport.unsupported`; None where not checked);
+    ``unmeasured_faces``: the faces :meth:`Report.unsupported_faces` names, most unmeasured first;
+    ``text``: all of it in one sentence."""
+
+    state: VerdictState
+    tolerance: float | None
+    limit: float | None
+    at_nodes: float
+    at_nodes_where: Place | None
+    between: float
+    between_where: Place | None
+    uncounted: float
+    uncounted_where: Place | None
+    measured: float | None
+    unmeasured_faces: tuple[int, ...]
+    text: str
+
+    @property
+    def tone(self) -> Tone:
+        return self.state.tone
+
+    @property
+    def measured_text(self) -> str:
+        """:attr:`measured` as the report writes it: "97 %", never rounded up to "100 %"; "not checked"."""
+        return "not checked" if self.measured is None else _percent(self.measured)
+
+    def to_dict(self) -> dict:
+        """JSON-ready (NaN as null); the sentence first."""
+        return _no_nan({"text": self.text, "state": self.state.value, "tolerance": self.tolerance,
+                        "limit": self.limit, "at_nodes": self.at_nodes,
+                        "at_nodes_where": None if self.at_nodes_where is None else str(self.at_nodes_where),
+                        "between": self.between,
+                        "between_where": None if self.between_where is None else str(self.between_where),
+                        "uncounted": self.uncounted,
+                        "uncounted_where": None if self.uncounted_where is None else str(self.uncounted_where),
+                        "measured": self.measured, "unmeasured_faces": list(self.unmeasured_faces)})
+
+
+def _mm(x: float) -> str:
+    return f"{x:.3g} mm"
+
+
+def _percent(share: float, up: bool = False) -> str:
+    """A share as a percentage never rounded to "100 %" or "0 %" unless it is all or nothing: rounded down
+    (a share measured: never more than there is), or ``up`` (a share unmeasured: never less)."""
+    p = 100.0 * share
+    if p >= 100.0:
+        return "100 %"
+    if p <= 0.0:
+        return "0 %"
+    if p < 0.1 and not up:
+        return "under 0.1 %"
+    step = 0.1 if p < 1.0 or p >= 99.0 else 1.0
+    cut = (math.ceil if up else math.floor)(p / step - (1e-9 if up else -1e-9)) * step
+    cut = min(max(cut, 0.1), 99.9)
+    return f"{round(cut, 1):g} %"
 
 
 def _g2_words(g: dict) -> str:
@@ -175,8 +305,9 @@ class Report:
                           + (f"up to {f.farthest_node:.3g} mm)" if math.isfinite(f.farthest_node) else "no node)")
                           for f in faces[:most])
         more = f" and {len(faces) - most} more" if len(faces) > most else ""
-        return (f"{named}{more} of the area farther than {GRID_REACH:g} node spacings from any node; the "
-                f"cold face there follows its edges and the field's estimate, unmeasured")
+        return (f"{named}{more} of the area unmeasured: farther than {GRID_REACH:g} node spacings from any node "
+                f"(the cold face there follows its edges and the field's estimate), or near nodes that do not tell "
+                f"that it is within the tolerance")
 
     @property
     def tolerance_met(self) -> bool | None:
@@ -186,13 +317,123 @@ class Report:
             return None
         return not self.misses()
 
+    def measured_share(self) -> float | None:
+        """The share (0 to 1) of the part's area measured: 1 less each face's
+        :attr:`FaceReport.unsupported` weighted by its area, over the faces checked; None where no face was
+        checked or no area is known."""
+        checked = [(f.area, f.unsupported) for f in self.faces
+                   if math.isfinite(f.unsupported) and math.isfinite(f.area) and f.area > 0.0]
+        total = sum(a for a, _ in checked)
+        if not checked or total <= 0.0:
+            return None
+        return max(0.0, 1.0 - sum(a * u for a, u in checked) / total)
+
+    def _largest_at_nodes(self) -> tuple[float, Place | None]:
+        found = [(x.delta_max, Place(feature, x.index)) for feature, items in ((Feature.FACE, self.faces),
+                                                                               (Feature.EDGE, self.edges))
+                 for x in items if math.isfinite(x.delta_max)]
+        if math.isfinite(self.vertex_delta_max):
+            found.append((self.vertex_delta_max, Place(Feature.VERTEX)))
+        if not found:
+            return float("nan"), None
+        return max(found, key=lambda item: item[0])
+
+    def _between_figures(self, limit: float | None) -> tuple[tuple[float, Place | None, bool],
+                                                             tuple[float, Place | None]]:
+        """The largest error found between the nodes ``(mm, place, counted)``, and ``(mm, place)`` of a larger
+        one beyond ``limit`` that :meth:`misses` does not count ((NaN, None) where there is none).
+
+        Two measures: what the refinement measured on the faces and edges it refined or found missing (counted
+        against the tolerance), and the cold check's grid over every face against the field's local estimate
+        (which :meth:`misses` does not count).
+        The first is the largest of those counted or within the limit, so that a miss the tolerance counts is
+        always the one named; where none of them is counted, the largest of all."""
+        found = [(f.delta_between, False, Place(Feature.FACE, f.index)) for f in self.faces
+                 if math.isfinite(f.delta_between)]
+        found += [(float(r["between_after"]), True, Place(feature, r[feature.value]))
+                  for feature, records in ((Feature.FACE, self.refinements), (Feature.EDGE, self.edge_refinements))
+                  for r in records if r.get("between_after") is not None and math.isfinite(r["between_after"])
+                  and r["between_after"] > 0.0]
+        none = (float("nan"), None)
+        if not found:
+            return (*none, False), none
+        beyond = [x for x in found if limit is not None and not x[1] and x[0] > limit]
+        kept = [x for x in found if x not in beyond]
+        first = max(kept, key=lambda x: x[:2]) if kept else None
+        extra = max(beyond, key=lambda x: x[0]) if beyond else None
+        if first is None or (extra is not None and not first[1]):     # no counted figure beside it: one figure
+            first, extra = extra, None
+        elif extra is not None and extra[0] <= first[0]:
+            extra = None
+        return (first[0], first[2], first[1]), none if extra is None else (extra[0], extra[2])
+
+    @property
+    def verdict(self) -> Verdict:
+        """The morph's one verdict (:class:`Verdict`): met, partly measured, NOT met or no tolerance, with the
+        largest error at the nodes and between them and the share of the area measured.  NOT met is
+        :attr:`tolerance_met` False (:meth:`misses`); partly measured is met where measured with a face named
+        by :meth:`unsupported_faces`."""
+        met = self.tolerance_met
+        unmeasured = tuple(f.index for f in self.unsupported_faces())
+        if met is None:
+            state = VerdictState.NO_TOLERANCE
+        elif not met:
+            state = VerdictState.NOT_MET
+        else:
+            state = VerdictState.PARTLY_MEASURED if unmeasured else VerdictState.MET
+        limit = None if self.tolerance is None else self.tolerance + self.allowance
+        at_nodes, at_where = self._largest_at_nodes()
+        (between, between_where, counted), (beyond, beyond_where) = self._between_figures(limit)
+        measured = self.measured_share()
+
+        if self.tolerance is None:
+            head = state.words
+        else:
+            noise = (f" + {self.allowance:.3g} mm for the field's scatter" if self.allowance > 0.1 * self.tolerance
+                     else "")
+            strict = ", knots kept (--keep-knots)" if self.keep_knots else ""
+            head = f"tolerance {self.tolerance:.3g} mm{noise}{strict}: {state.words}"
+        # the figures, worst first, but one beyond the limit that misses() does not count (the cold check's grid
+        # against the field's local estimate between the nodes, the vertices' nodes) after those it counts, and
+        # saying so: a NOT met names first what made it so
+        errors = []
+        if at_where is not None:
+            aside = ("; not counted against the tolerance" if limit is not None and at_where.feature is Feature.VERTEX
+                     and at_nodes > limit else "")
+            errors.append((bool(aside), -at_nodes, f"{_mm(at_nodes)} at the nodes ({at_where}{aside})"))
+        else:
+            errors.append((True, 0.0, "no node used"))
+        if between_where is not None:
+            aside = ("" if limit is None or between <= limit or counted else
+                     ", against the field's local estimate; not counted against the tolerance")
+            errors.append((bool(aside), -between, f"{_mm(between)} between the nodes ({between_where}{aside})"))
+        else:
+            errors.append((True, 0.0, "nothing measured between the nodes"))
+        errors.sort(key=lambda item: item[:2])
+        if beyond_where is not None:
+            errors.append((True, -beyond, f"{_mm(beyond)} off the field's local estimate between the nodes "
+                                   f"({beyond_where}; not counted against the tolerance)"))
+        if measured is None:
+            area = "area measured not checked"
+        else:
+            only = "only " if state is VerdictState.PARTLY_MEASURED else ""
+            area = f"{only}{_percent(measured)} of the area measured"
+        if unmeasured:
+            share = {f.index: f.unsupported for f in self.faces}
+            named = ", ".join(f"{_percent(share[k], up=True)} of face {k}" for k in unmeasured[:3])
+            more = f" and {len(unmeasured) - 3} more faces" if len(unmeasured) > 3 else ""
+            area += f" (unmeasured: {named}{more})"
+        text = f"{head} — {', '.join(words for *_, words in errors)}; {area}"
+        return Verdict(state, self.tolerance, limit, at_nodes, at_where, between, between_where, beyond,
+                       beyond_where, measured, unmeasured, text)
+
     @property
     def nodes_used(self) -> int:
         return self.nodes_total - self.nodes_ignored
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (NaN written as null)."""
-        data = asdict(self)
+        data = {"verdict": self.verdict.to_dict(), **asdict(self)}      # the verdict first: what a user sees
         data["nodes_used"] = self.nodes_used
         data["closed"] = self.free_edges == 0
         data["tolerance_met"] = self.tolerance_met
@@ -202,7 +443,7 @@ class Report:
     def to_json(self, path) -> None:
         """Write the report as JSON to ``path``."""
         with open(path, "w", encoding="utf-8") as fh:
-            json.dump(self.to_dict(), fh, indent=2)
+            json.dump(self.to_dict(), fh, indent=2, ensure_ascii=False)     # the verdict's dash as written
             fh.write("\n")
 
     def _misses(self, refinement: dict) -> bool:
@@ -211,8 +452,10 @@ class Report:
         return max(refinement.get("delta_max_after", 0.0), refinement.get("between_after", 0.0)) > limit
 
     def table(self) -> str:
-        """A short text table: per face as the paper's Table 1, then the overall checks."""
-        lines = [f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}  name"]
+        """A short text table: the verdict first (:attr:`verdict`), then per face as the paper's Table 1, then
+        the overall checks."""
+        lines = [self.verdict.text,
+                 f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}  name"]
         for f in self.faces:
             lines.append(f"{f.index:>5} {f.nodes:>9} {f.control_points:>15} {_num(f.delta_max):>10} "
                          f"{_num(f.delta_mean):>10}  {f.name}".rstrip())
@@ -222,8 +465,10 @@ class Report:
         inside = (f" (of them {self.element_points} points inside the FE elements, by their shape functions)"
                   if self.element_points else "")
         lines.append(f"nodes: {self.nodes_total} total{inside}, {self.nodes_used} used "
-                     f"({self.nodes_on_faces} face, {self.nodes_on_edges} edge, {self.nodes_on_vertices} vertex), "
-                     f"{self.nodes_ignored} ignored (farther than {self.node_distance:.3g} mm from every face)")
+                     f"({self.nodes_on_faces} inside a face, {self.nodes_on_edges} within {self.edge_distance:.3g} mm "
+                     f"of an edge, {self.nodes_on_vertices} at a vertex), {self.nodes_ignored} ignored: farther than "
+                     f"{self.node_distance:.3g} mm (--node-distance) from every face, e.g. volume nodes of a solid "
+                     f"mesh")
         for s in self.solids:
             name = f" {s.name!r}" if s.name else ""
             lines.append(f"solid {s.index}{name}: {'valid' if s.valid else 'INVALID'}, "
@@ -279,12 +524,9 @@ class Report:
                 how = (g.get("method") or "corrected") if g["corrected"] else f"not corrected: {g['reason']}"
                 lines.append(f"  edge {g['edge']} (faces {g['faces'][0]}, {g['faces'][1]}): kink "
                              f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how}){_g2_words(g)}")
-        if self.tolerance is not None:
-            noise = (f" + {self.allowance:.3g} mm for the field's scatter ({self.scatter:.3g} mm about a smooth "
-                     f"field)" if self.allowance > 0.1 * self.tolerance else "")
-            strict = ", knots kept (--keep-knots)" if self.keep_knots else ""
-            lines.append(f"tolerance {self.tolerance:.3g} mm{noise}{strict}: "
-                         f"{'met' if self.tolerance_met else 'NOT met'}")
+        if self.tolerance is not None and self.allowance > 0.1 * self.tolerance:   # the verdict says how much
+            lines.append(f"field's scatter: {self.scatter:.3g} mm about a smooth field, {self.allowance:.3g} mm "
+                         f"added to the tolerance at the nodes")
         if self.unsupported_faces():
             lines.append(f"not measured: {self.unsupported_text()}")
         if self.inversion:
@@ -393,6 +635,8 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
     (:func:`hot2cold.pipeline.load.element_points`).
     """
     part, cls, field = context.part, context.classification, context.field
+    # the hot faces' areas weigh the share of each face out of its nodes' reach (Verdict.measured)
+    areas = face_areas(part.kernel.faces) if checks.unsupported is not None else np.full(len(part.faces), np.nan)
     faces = []
     for fm in fits.faces:
         d = errors[cls.nodes_of(Role.FACE, fm.index)]
@@ -402,7 +646,8 @@ def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.n
                                  (float(checks.unsupported[fm.index]), float(checks.farthest_node[fm.index])))
         faces.append(FaceReport(fm.index, part.faces[fm.index].solid, fm.nodes, f"{nu}x{nv}", *_stats(d),
                                 fm.unknowns, fm.rank, fm.condition, list(fm.tied_sides), fm.edge_rows,
-                                fm.artificial, between, unsupported, farthest, part.face_title(fm.index)))
+                                fm.artificial, between, unsupported, farthest, part.face_title(fm.index),
+                                float(areas[fm.index])))
     edges = []
     for em in fits.edges:
         d = errors[cls.nodes_of(Role.EDGE, em.index)]

@@ -26,6 +26,7 @@ from . import pictures
 from .scene import build_scene
 from .viewer import STYLE as _VIEWER_STYLE, viewer_html
 from ..io.atomic import write_atomically
+from ..pipeline.report import UNSUPPORTED_SHARE, Tone
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +40,13 @@ th, td { border: 1px solid #d0d0d0; padding: 0.2em 0.6em; text-align: right; }
 th { background: #f0f0f0; } td.l, th.l { text-align: left; }
 tr:nth-child(even) td { background: #fafafa; }
 .ok { color: #1a7f37; font-weight: 600; } .bad { color: #c62828; font-weight: 600; }
+.warn { color: #9a6700; font-weight: 600; } .plain { font-weight: 600; }
+p.verdict { font-size: 1.15em; padding: 0.55em 0.9em; margin: 0.5em 0 0.6em 0; border-left: 6px solid;
+            border-radius: 3px; }
+p.verdict.v-good { color: #14532d; background: #e7f5ec; border-color: #1a7f37; }
+p.verdict.v-warning { color: #6b4200; background: #fff3d1; border-color: #d39e00; }
+p.verdict.v-bad { color: #8e1b1b; background: #fdecea; border-color: #c62828; }
+p.verdict.v-neutral { color: #333; background: #f0f0f0; border-color: #999; }
 .muted { color: #777; } figure { margin: 1em 0 2em 0; } figure img { max-width: 100%; height: auto;
 border: 1px solid #e0e0e0; } figcaption { font-size: 0.9em; color: #444; margin-top: 0.3em; }
 dl.summary { display: grid; grid-template-columns: max-content auto; gap: 0.15em 1.2em; }
@@ -62,8 +70,37 @@ def _deg(x) -> str:
     return f"{x:.3g}°"
 
 
-def _flag(ok: bool, yes: str, no: str) -> str:
-    return f'<span class="ok">{_e(yes)}</span>' if ok else f'<span class="bad">{_e(no)}</span>'
+def _flag(ok: bool, yes: str, no: str, green: bool = True) -> str:
+    """``yes`` (green where ``green``, else plain) or ``no`` in red: a page green only where its verdict is
+    (:data:`_TONE_CLASS`), so that a valid part that misses its tolerance shows no green at all."""
+    if not ok:
+        return f'<span class="bad">{_e(no)}</span>'
+    return f'<span class="{"ok" if green else "plain"}">{_e(yes)}</span>'
+
+
+#: The CSS class of each :class:`~hot2cold.pipeline.report.Tone` of a verdict, for the verdict's words.
+_TONE_CLASS = {Tone.GOOD: "ok", Tone.WARNING: "warn", Tone.BAD: "bad", Tone.NEUTRAL: "plain"}
+
+
+def _green(report) -> bool:
+    """Whether the page may show anything in green: only when the verdict is met and fully measured."""
+    return report.verdict.tone is Tone.GOOD
+
+
+def _verdict(report) -> str:
+    """The verdict, the page's headline (:attr:`~hot2cold.pipeline.report.Report.verdict`): the same sentence
+    as the command's first line, coloured by the verdict alone (green met, amber partly measured, red NOT met,
+    grey no tolerance)."""
+    verdict = report.verdict
+    head, dash, rest = verdict.text.partition(" — ")
+    return (f'<p class="verdict v-{verdict.tone.value}" id="verdict" data-state="{_e(verdict.state.name)}">'
+            f"<strong>{_e(head)}</strong>{_e(dash)}{_e(rest)}</p>")
+
+
+def _state(report) -> str:
+    """The verdict's state in its colour, for the summary and the tolerance section."""
+    verdict = report.verdict
+    return f'<span class="{_TONE_CLASS[verdict.tone]}">{_e(verdict.state.words)}</span>'
 
 
 def _table(head: list[str], rows: list[list[str]], left: set[int] = frozenset(), cls: str = "",
@@ -82,17 +119,22 @@ def _img(png: bytes, alt: str) -> str:
 
 
 def _summary(report) -> str:
-    items = [
+    verdict, green = report.verdict, _green(report)
+    items = []
+    if report.tolerance is not None:
+        items.append(("tolerance", f"{report.tolerance:.3g} mm{_widened(report)}: " + _state(report)))
+    unmeasured = len(verdict.unmeasured_faces)
+    items += [
+        ("area measured", _e(verdict.measured_text) + (f" ({unmeasured} {'face' if unmeasured == 1 else 'faces'} "
+                                                       f"more than {100 * UNSUPPORTED_SHARE:g} % unmeasured)"
+                                                       if unmeasured else "")),
         ("hot part", _e(report.hot or "–")),
         ("field", _e(report.field or "–")),
-        ("cold part", _flag(report.valid, "valid", "INVALID") + ", "
-         + _flag(report.free_edges == 0, "closed", f"{report.free_edges} free edges")),
+        ("cold part", _flag(report.valid, "valid", "INVALID", green) + ", "
+         + _flag(report.free_edges == 0, "closed", f"{report.free_edges} free edges", green)),
         ("Δmax / Δmean", f"{_mm(report.delta_max)} mm / {_mm(report.delta_mean)} mm"),
         ("largest displacement", f"{report.max_displacement:.4g} mm"),
     ]
-    if report.tolerance is not None:
-        items.append(("tolerance", f"{report.tolerance:.3g} mm{_widened(report)}: "
-                      + _flag(bool(report.tolerance_met), "met", "NOT met")))
     return '<dl class="summary">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
 
 
@@ -134,8 +176,9 @@ def _checks(report) -> str:
     rows = []
     for s in report.solids:
         change = (s.volume_cold - s.volume_hot) / s.volume_hot * 100 if s.volume_hot else float("nan")
-        rows.append([str(s.index), str(s.faces), _flag(s.valid, "valid", "INVALID"),
-                     _flag(s.closed, "0", str(s.free_edges)), f"{s.volume_hot:.6g}", f"{s.volume_cold:.6g}",
+        rows.append([str(s.index), str(s.faces), _flag(s.valid, "valid", "INVALID", _green(report)),
+                     _flag(s.closed, "0", str(s.free_edges), _green(report)), f"{s.volume_hot:.6g}",
+                     f"{s.volume_cold:.6g}",
                      _mm(change, "+.4f")])
     solids = _table(["solid", "faces", "validity", "free edges", "volume hot [mm³]", "volume cold [mm³]",
                      "change [%]"], rows)
@@ -164,8 +207,7 @@ def _tolerance(report) -> str:
         parts.append("<p>No tolerance was set: faces keep their hot control nets (no refinement).</p>")
     else:
         strict = " Knots kept (<code>--keep-knots</code>): nothing refined." if report.keep_knots else ""
-        parts.append(f"<p>Tolerance {report.tolerance:.3g} mm{_widened(report)}: "
-                     f"{_flag(bool(report.tolerance_met), 'met', 'NOT met')} "
+        parts.append(f"<p>Tolerance {report.tolerance:.3g} mm{_widened(report)}: {_state(report)} "
                      f"(largest Δmax {_mm(report.delta_max)} mm).{strict}</p>")
     if report.unsupported_faces():
         parts.append(f"<p>Not measured: {_e(report.unsupported_text(most=10))}.</p>")
@@ -280,6 +322,7 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
     title = f"hot2cold report: {Path(report.hot).name if report.hot else 'morph'}"
     body = [
         f"<h1>{_e(title)}</h1>",
+        _verdict(report),
         f'<p class="muted">hot2cold {_e(__version__)}, {_e(now)}. Method: GT2014-26683 (hot-to-cold '
         f"B-spline morphing; only control points move).</p>",
         _summary(report),
@@ -293,7 +336,8 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
         _timings(report),
     ]
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            f"<title>{_e(title)}</title>\n<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
+            f"<title>{_e(title)}: {_e(report.verdict.state.value)}</title>\n"
+            f"<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
             "</head>\n<body>\n"
             + "\n".join(body) + "\n</body>\n</html>\n")
 
