@@ -141,12 +141,15 @@ def test_partly_measured_is_met_where_measured_with_a_face_out_of_reach():
     assert verdict.text.endswith("; only 85 % of the area measured (unmeasured: 60 % of face 1)")
 
 
-def test_a_little_unmeasured_area_within_the_rule_stays_met_and_is_not_rounded_to_100():
+def test_any_unmeasured_area_is_partly_measured_and_not_rounded_to_100():
+    """No face beyond UNSUPPORTED_SHARE, but some area the check does not vouch for: not green (a sharp thermal
+    front the nodes do not resolve is a few per cent of a face, and the cold part was 2e-3 mm off there)."""
     faces = [_face(0, unsupported=0.004), _face(1, area=10.0, unsupported=UNSUPPORTED_SHARE)]
     verdict = _report(faces=faces).verdict
-    assert verdict.state is VerdictState.MET                   # no face beyond UNSUPPORTED_SHARE
+    assert verdict.state is VerdictState.PARTLY_MEASURED
     assert verdict.measured == pytest.approx(1.0 - (0.004 * 30.0 + 0.1 * 10.0) / 40.0)
-    assert verdict.text.endswith("; 97 % of the area measured")
+    assert verdict.text.endswith("; only 97 % of the area measured (unmeasured: 10 % of face 1, 0.4 % of face 0)")
+    assert _report(faces=[_face(0, unsupported=0.0), _face(1, unsupported=0.0)]).verdict.state is VerdictState.MET
     assert _percent(0.9996) == "99.9 %" and _percent(1.0) == "100 %" and _percent(0.0) == "0 %"
     assert _percent(0.004) == "0.4 %" and _percent(0.505) == "50 %" and _percent(0.0004) == "under 0.1 %"
     # a share unmeasured is rounded up: a face named for more than 10 % never reads "10 %"

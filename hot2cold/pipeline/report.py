@@ -35,10 +35,12 @@ class FaceReport:
     ``delta_max`` and ``delta_mean`` are the errors at the face's nodes (eq. 21-22); ``delta_between`` is the
     largest distance of the cold face from the field's local estimate on a grid over its trimmed domain, the
     error between the nodes as far as the nodes tell (:func:`~.checks.check_cold`).  ``unsupported`` is the
-    share (0 to 1) of that grid farther than :data:`~.checks.GRID_REACH` node spacings (theirs or all nodes',
-    the larger: ``FaceGrid.support``) from the nodes of the face, its edges and vertices, where nothing
-    measures the face (its shape there comes from its edges and the field's estimate), and
-    ``farthest_node`` the largest such distance (mm); NaN where not checked.  ``name``: the face's name in the hot
+    share (0 to 1) of that grid the check does not vouch for (:meth:`~.checks.FaceGrid.unmeasured`): farther
+    than :data:`~.checks.GRID_REACH` node spacings (theirs or all nodes', the larger: ``FaceGrid.support``)
+    from the nodes of the face, its edges and vertices, where nothing measures the face (its shape there
+    comes from its edges and the field's estimate), or near them where the cold face with the estimate's
+    doubt may be beyond the limit; ``farthest_node`` the largest distance to a node (mm); NaN where not
+    checked.  ``name``: the face's name in the hot
     STEP, else one from its surface kind and place (:meth:`~hot2cold.core.model.Part.face_title`).  ``area``:
     the hot face's trimmed area (mm²; NaN where not known), what weighs ``unsupported`` in the share of the
     part's area measured (:attr:`Verdict.measured`)."""
@@ -371,10 +373,14 @@ class Report:
     def verdict(self) -> Verdict:
         """The morph's one verdict (:class:`Verdict`): met, partly measured, NOT met or no tolerance, with the
         largest error at the nodes and between them and the share of the area measured.  NOT met is
-        :attr:`tolerance_met` False (:meth:`misses`); partly measured is met where measured with a face named
-        by :meth:`unsupported_faces`."""
+        :attr:`tolerance_met` False (:meth:`misses`); partly measured is met where measured with some of the
+        area not vouched for: faces named by :meth:`unsupported_faces`, or else those with any share unmeasured
+        (:attr:`FaceReport.unsupported`: between the nodes the check cannot tell the cold face within the
+        limit there, a sharp thermal front the nodes do not resolve)."""
         met = self.tolerance_met
-        unmeasured = tuple(f.index for f in self.unsupported_faces())
+        unmeasured = (tuple(f.index for f in self.unsupported_faces())
+                      or tuple(f.index for f in sorted((f for f in self.faces if f.unsupported > 0.0),
+                                                       key=lambda f: -f.unsupported)))
         if met is None:
             state = VerdictState.NO_TOLERANCE
         elif not met:
