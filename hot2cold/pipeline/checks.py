@@ -1,8 +1,11 @@
 """Checks on the way through the morph: the hot part and the field on entry, the cold part after the sew.
 
 * :func:`check_hot`: the hot part is a valid closed solid (else :class:`InputError` naming the face at fault);
+* :func:`check_positions`, before the nodes are classified: the field's positions are the hot part's, not
+  the cold part's (else :class:`FieldError` naming the mix-up of hot and cold);
 * :func:`check_coverage`: the field lies on the part, in the part's units, and covers every face (else
-  :class:`FieldError`, or a warning with ``Settings.extrapolate``);
+  :class:`FieldError`, or a warning with ``Settings.extrapolate``); more nodes outside the part than a few is
+  warned about;
 * :func:`check_coverage` also refuses a field whose displacements are of the part's size
   (``Settings.max_displacement_rel``);
 * :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself, no face moved
@@ -15,6 +18,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable
 
@@ -27,7 +31,7 @@ from ..core.bspline import (NORMAL_RTOL, evaluate_curve, evaluate_surface, knot_
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
 from ..errors import FieldError, InputError, KernelError, MorphError
-from .classify import curve_length
+from .classify import curve_length, part_distances
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
@@ -35,6 +39,7 @@ from ..core.domain import Trim
 from ..core.model import Classification, Face, Part, Role
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
+from ..kernel.tessellate import tessellate
 from ..kernel.topology import broken_solid, solid_fault
 from ..settings import Settings
 
@@ -82,12 +87,205 @@ def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
             raise KernelError(f"B-spline conversion made solid {s} invalid: {solid_fault(part.kernel.hot, s)}")
 
 
-#: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user.
+#: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user of a text
+#: table (:func:`_unit_hint` says it for the other files).
 _UNIT_HINTS = ((1e-3, "the field looks like metres: use --field-units m (units='m')"),
                (1 / 25.4, "the field looks like inches: convert it to mm"),
                (1e3, "the field is 1000 times larger than the part: is the part in metres or the field in µm?"),
                (25.4, "the field is 25.4 times larger than the part: is the part modelled in inches but written "
                       "as mm?"))
+#: A ratio within this share of a unit factor is taken for that factor: a field over the whole part spans a
+#: little less than the part's bounding box (which the kernel takes from the B-spline poles), and one that spans
+#: a twentieth of it is not in inches but off the part.
+_UNIT_MATCH = 0.1
+
+
+def _file_kind(source: str | None) -> str:
+    """What a field was read from, by its name: ``text`` (a table, whose columns can be written again),
+    ``npz``, ``rst`` (an ANSYS result, which states its unit system), ``solver`` (other solver results) or
+    ``other`` (a mesh file, arrays)."""
+    suffix = os.path.splitext(str(source or "").lower())[1]
+    kinds = {".csv": "text", ".txt": "text", ".dat": "text", ".tsv": "text", ".npz": "npz", ".rst": "rst",
+             ".rth": "rst", ".frd": "solver", ".op2": "solver", ".pch": "solver", ".punch": "solver"}
+    return kinds.get(suffix, "other")
+
+
+def _unit_hint(factor: float, kind: str) -> str:
+    """What to tell the user of a field of ``kind`` (:func:`_file_kind`) whose extent is ``factor`` times the
+    part's: a solver's results cannot be converted by hand, and ``--field-units`` takes mm and m only."""
+    text = dict(_UNIT_HINTS)[factor]
+    if kind == "text" or factor > 1:
+        return text
+    if factor == 1e-3:
+        if kind == "rst":
+            return ("the field looks like metres: use --field-units m (batch column field_units) where the .rst "
+                    "states no length unit; where it states one, the model's unit system (/UNITS) is not the one "
+                    "its numbers are in")
+        return "the field looks like metres: use --field-units m (batch column field_units)"
+    if kind == "npz":
+        return ("the field looks like inches, which --field-units (mm or m) does not take: save its points and "
+                "displacements in mm")
+    return ("the field looks like inches, which --field-units (mm or m) does not take: export its nodes and "
+            "displacements as a CSV whose column headers state the unit, e.g. 'x (in)'"
+            + (", or give the model the inch unit system (/UNITS,BIN), which the .rst then states" if kind == "rst"
+               else ""))
+
+
+#: Nodes of a field sampled (seeded: the same ones every run) where the checks before the morph ask where
+#: the nodes lie.
+_SAMPLE = 2000
+#: A point lies on the part rather than another where it is this many times nearer to it, and within this
+#: share of the node distance.
+_NEARER, _ON_SHARE = 10.0, 0.1
+#: Distances below this share of the part's diagonal are rounding (a node on a face): nothing is nearer.
+_ROUNDING = 1e-6
+#: Hot and cold are mixed up where the nodes moved by their displacements (or against them) lie on the part
+#: rather than where they are for this share of the sampled nodes at least, and ``_MIXED_LEAST`` of them, and
+#: for ``_MIXED_ODDS`` times as many as the other way round and as moved the other way.
+_MIXED_SHARE, _MIXED_LEAST, _MIXED_ODDS = 0.05, 10, 4
+
+
+def _percent(share: float) -> str:
+    """``share`` (0 to 1) in whole per cent, never 0 or 100 unless it is."""
+    return f"{min(max(round(100 * share), 1 if share > 0 else 0), 99 if share < 1 else 100)}"
+
+
+def _sample(n: int, most: int) -> np.ndarray:
+    """Up to ``most`` of ``n`` rows, sorted, the same every run."""
+    return np.sort(np.random.default_rng(0).choice(n, most, replace=False)) if n > most else np.arange(n)
+
+
+def check_positions(part: Part, field: DisplacementField, projector: Projector, settings: Settings,
+                    inverted: bool = False) -> None:
+    """Raise :class:`FieldError` when hot and cold are mixed up in ``field``: its nodes moved by their
+    displacements (the cold part's positions given with cold-to-hot displacements), or moved against them
+    (displaced positions: the cold part's, given with hot-to-cold displacements), lie on the hot part rather
+    than where they are.  A hot-to-cold field has its nodes on the hot part and the moved ones off it by the
+    displacement across the surface.
+
+    On :data:`_SAMPLE` nodes at the most, before they are classified (which takes long for nodes off the part);
+    a point lies on the part rather than another where it is ``_NEARER`` times nearer to it and within
+    ``_ON_SHARE`` of the node distance (:func:`~hot2cold.pipeline.classify.part_distances`).  ``inverted``: the
+    field is a cold-to-hot one, inverted (``--invert``), whose displacements are about the given ones negated;
+    the message speaks of the field as given.
+    """
+    rows = _sample(len(field), _SAMPLE)
+    m = len(rows)
+    if m < _MIXED_LEAST:
+        return
+    points, moves = field.points[rows], field.displacements[rows]
+    rounding = _ROUNDING * part.diagonal
+    if not np.any(np.linalg.norm(moves, axis=1) > _NEARER * rounding):
+        return              # moved or not, the nodes lie where they lie: nothing to tell
+    node_distance = settings.lengths(part.diagonal)[0]
+    raw = part_distances(part, np.concatenate([points, points + moves, points - moves]), projector,
+                         node_distance, settings.threads).reshape(3, m)
+    here, there = np.maximum(raw[0], rounding), np.maximum(raw[1:], rounding)
+    on = _ON_SHARE * node_distance
+    nearer = np.sum(there * _NEARER < np.minimum(here, on), axis=1)
+    farther = np.sum(here * _NEARER < np.minimum(there, on), axis=1)
+    log.debug("of %d nodes sampled, moved with / against their displacements, %s lie on the part rather than "
+              "where they are, %s the other way round", m, nearer.tolist(), farther.tolist())
+    k = int(np.argmax(nearer))
+    if nearer[k] < max(_MIXED_LEAST, _MIXED_SHARE * m) or nearer[k] < _MIXED_ODDS * max(farther[k], nearer[1 - k]):
+        return
+    plus = (k == 0) != inverted                      # the given positions plus the given displacements
+    both = np.isfinite(raw[0]) & np.isfinite(raw[1 + k])
+    medians = (f" (median distance {np.median(raw[1 + k][both]):.2g} mm against {np.median(raw[0][both]):.2g} mm)"
+               if np.count_nonzero(both) >= _MIXED_LEAST else "")
+    raise FieldError(
+        f"{field.source or 'the field'} mixes up hot and cold: its positions {'plus' if plus else 'minus'} its "
+        f"displacements lie on the hot part, its positions do not: of {m} nodes sampled, "
+        f"{_percent(np.mean(np.isfinite(raw[1 + k])))} % lie within the node distance ({node_distance:.3g} mm) "
+        f"of it so and {_percent(np.mean(np.isfinite(raw[0])))} % as given, {_percent(nearer[k] / m)} % are "
+        f"{_NEARER:.0f} times nearer so{medians}; " + _mix_up_fix(plus, inverted, _file_kind(field.source)))
+
+
+def _mix_up_fix(plus: bool, inverted: bool, kind: str) -> str:
+    """What hot and cold mixed up means and how to give the field instead (:func:`check_positions`): ``plus``,
+    the given positions plus the given displacements lie on the hot part (else minus); ``inverted``, the field
+    was given with --invert; ``kind``, :func:`_file_kind`."""
+    invert = "--invert (batch column invert)"
+    if plus:
+        how = {"text": "write x+dx, y+dy, z+dz in its x, y, z columns and -dx, -dy, -dz in its dx, dy, dz columns",
+               "npz": "save points + displacements as its points and -displacements as its displacements"}.get(
+            kind, "export its nodes at x+dx, y+dy, z+dz with the displacements -dx, -dy, -dz as a CSV with the "
+                  "columns x,y,z,dx,dy,dz")
+        return ("the positions are the cold part's and the displacements go from cold to hot, where hot2cold takes "
+                "the hot part's positions and displacements from hot to cold: " + how
+                + " (the same field, seen from the hot part)"
+                + (f", and drop {invert}: it takes a cold-to-hot field at the hot part's nodes, not at the cold "
+                   f"part's" if inverted else
+                   f"; {invert} is not for this: it takes a cold-to-hot field at the hot part's nodes"))
+    how = {"text": "write x-dx, y-dy, z-dz in its x, y, z columns",
+           "npz": "save points - displacements as its points"}.get(
+        kind, "export the undeformed node positions, x-dx, y-dy, z-dz, as a CSV with the columns x,y,z,dx,dy,dz")
+    return ("the positions are displaced ones (the cold part's, where the displacements go from hot to cold), where "
+            "hot2cold takes the hot part's: " + how + ", the displacements as they are"
+            + (f", and keep {invert} only if they go from cold to hot" if inverted else
+               f", and give {invert} if they go from cold to hot"))
+
+
+#: Nodes off the part beyond this share of the field's are looked at: are they inside the solid (volume
+#: nodes) or outside it?  More outside than this share is warned about.
+_OUTSIDE_SHARE = 0.05
+#: Off-part nodes sampled at the most to tell inside from outside.
+_OUTSIDE_SAMPLE = 500
+#: Outside nodes within this many node distances of the part lie near it (a geometry a little off the part's).
+_NEAR_OUTSIDE = 10.0
+
+
+@dataclass(frozen=True)
+class _Outside:
+    """Where the nodes off the part lie: ``share``, of the field's nodes, outside every solid (farther than the
+    node distance from every face); ``near``, the share of those within ``_NEAR_OUTSIDE`` node distances."""
+
+    share: float
+    near: float
+
+    @classmethod
+    def of(cls, part: Part, classification: Classification, field: DisplacementField, projector: Projector,
+           threads: int = 1) -> _Outside | None:
+        """Of a sample of the off-part nodes (:data:`_OUTSIDE_SAMPLE`); None where the kernel gives no
+        triangles to tell inside from outside."""
+        off = np.flatnonzero(~classification.used)
+        if not len(off):
+            return cls(0.0, 0.0)
+        rows = off[_sample(len(off), _OUTSIDE_SAMPLE)]
+        out = _outside(part, field.points[rows])
+        if out is None:
+            return None
+        reach = _NEAR_OUTSIDE * classification.node_distance
+        near = (np.mean(np.isfinite(part_distances(part, field.points[rows[out]], projector, reach, threads)))
+                if out.any() else 0.0)
+        return cls(float(np.mean(out)) * len(off) / len(classification.used), float(near))
+
+
+def _outside(part: Part, points: np.ndarray) -> np.ndarray | None:
+    """Which of ``points (m, 3)`` lie outside every solid of ``part``: the winding number of the solids'
+    faces, triangulated to 2e-3 of the part's diagonal, about each point is below one half (right for a point
+    farther from the faces than the triangles are).  None where the kernel gives no triangles."""
+    try:
+        mesh = tessellate(part.kernel.hot, deflection=2e-3 * part.diagonal, angle_deg=20.0)
+    except KernelError as exc:
+        log.debug("no inside test of the nodes off the part: %s", exc)
+        return None
+    in_solid = np.array([face.solid >= 0 for face in part.faces], bool)
+    triangles = mesh.triangles[in_solid[mesh.face]] if len(in_solid) > mesh.face.max() else mesh.triangles
+    if not len(triangles):
+        return None
+    corners = [mesh.vertices[triangles[:, i]] for i in range(3)]
+    winding = np.zeros(len(points))
+    step = max(1, 1_000_000 // len(triangles))
+    for at in range(0, len(points), step):
+        a, b, c = (x[None, :, :] - points[at:at + step, None, :] for x in corners)
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        det = np.einsum("ijk,ijk->ij", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("ijk,ijk->ij", a, b) * lc + np.einsum("ijk,ijk->ij", b, c) * la
+               + np.einsum("ijk,ijk->ij", c, a) * lb)
+        winding[at:at + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)    # solid angle / 4 pi
+    return winding < 0.5
+
 
 #: Faces named in a message at the most.
 _NAMED = 6
@@ -136,10 +334,13 @@ def face_coverage(part: Part, cls: Classification) -> tuple[np.ndarray, np.ndarr
     return inner, boundary, covered
 
 
-def check_coverage(part: Part, cls: Classification, field: DisplacementField, settings: Settings) -> None:
+def check_coverage(part: Part, cls: Classification, field: DisplacementField, settings: Settings,
+                   projector: Projector | None = None) -> None:
     """Raise :class:`FieldError` when the field and the part clearly disagree: no node on the part, most
-    nodes off the part with a field whose extent differs from the part's by a unit factor, or faces of a
-    solid that the field leaves bare (unless ``settings.extrapolate``: then a warning).
+    nodes off the part with a field whose extent is the part's times a unit factor (to within
+    ``_UNIT_MATCH``), or faces of a solid that the field leaves bare (unless ``settings.extrapolate``: then a
+    warning); the last names a field whose nodes do not lie on this part as such.  Warn where more than
+    ``_OUTSIDE_SHARE`` of the nodes lie outside the part (volume nodes lie inside it).
 
     A face is covered when an FE node lies inside it or when every edge of its boundary carries one
     (:func:`face_coverage`: narrow faces an FE element spans, the planes of a tessellation).  A face that is
@@ -155,7 +356,8 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     extent = float(np.linalg.norm(np.ptp(field.points, axis=0))) if len(field) > 1 else 0.0
     ratio = extent / part.diagonal
     used = float(np.mean(cls.used))
-    factor, hint = next(((f, text) for f, text in _UNIT_HINTS if 0.5 * f <= ratio <= 2.0 * f), (None, None))
+    factor = next((f for f, _ in _UNIT_HINTS if abs(ratio / f - 1.0) <= _UNIT_MATCH), None)
+    hint = _unit_hint(factor, _file_kind(field.source)) if factor is not None else None
     source = field.source or "the field"
     if hint and used < 0.5:
         raise FieldError(f"{source} spans {extent:.4g} mm but the part {part.diagonal:.4g} mm "
@@ -170,12 +372,47 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     if used == 0:
         centre = part.vertices.mean(axis=0) if len(part.vertices) else np.zeros(3)
         spread = np.linalg.norm(field.points - centre, axis=1)
+        if not 0.8 <= ratio <= 1.25:        # of another size than the part, and of no unit factor
+            raise FieldError(
+                f"no FE node of {source} lies within {cls.node_distance:.3g} mm of the part: the nodes do not lie on "
+                f"this part (they are {spread.min():.4g} to {spread.max():.4g} mm from its centre; the field spans "
+                f"{extent:.4g} mm, the part {part.diagonal:.4g} mm): give this part's field (the FIELD argument, "
+                f"batch column field)")
         raise FieldError(
             f"no FE node of {source} lies within {cls.node_distance:.3g} mm of the part "
             f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
             f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
             f"this part, or raise --node-distance")
     _check_displacements(part, cls, field, settings)
+    outside = None
+    if 1.0 - used > _OUTSIDE_SHARE:
+        projector = projector or Projector(part.kernel.faces, part.kernel.edges)
+        outside = _Outside.of(part, cls, field, projector, settings.threads)
+    foreign = ""
+    if 1.0 - used > 0.5 and outside is not None and (outside.share > 0.5 or not 0.8 <= ratio <= 1.25):
+        # most nodes off the part, outside it or in a field of another size than the part's: no volume nodes
+        out = f"{_percent(outside.share)} % outside it; " if outside.share else ""
+        foreign = (f"the nodes do not lie on this part: {_percent(1 - used)} % of them are farther than "
+                   f"{cls.node_distance:.3g} mm from it ({out}the field spans {extent:.4g} mm, the part "
+                   f"{part.diagonal:.4g} mm)")
+    _check_faces(part, cls, field, settings, foreign)
+    if outside is not None and outside.share > _OUTSIDE_SHARE:
+        why = (f"most of them within {_NEAR_OUTSIDE * cls.node_distance:.3g} mm of it: the FE model's geometry is "
+               f"not this part's to within the node distance (another version of the part?); check the field, or "
+               f"raise --node-distance (batch column node_distance) where the difference is accepted"
+               if outside.near >= 0.5 else
+               "nodes of other parts, or another part's field: check that the field is this part's")
+        log.warning("%s: %s %% of its nodes lie outside the part, farther than %.3g mm from every face, more "
+                    "than volume nodes explain (they lie inside it): %s; they are ignored", source,
+                    _percent(outside.share), cls.node_distance, why)
+
+
+def _check_faces(part: Part, cls: Classification, field: DisplacementField, settings: Settings,
+                 foreign: str = "") -> None:
+    """The faces of :func:`check_coverage`: :class:`FieldError` where a face of a solid gets no node (with
+    ``foreign``, why the nodes do not lie on this part, the refusal says so), a warning with
+    ``settings.extrapolate``."""
+    source = field.source or "the field"
     inner, boundary, edges_covered = face_coverage(part, cls)
     free = np.array([face.solid < 0 for face in part.faces], bool)
     bare_free = np.flatnonzero(free & (inner + boundary == 0))
@@ -229,6 +466,9 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
         log.warning("%s covers only part of the solid: %s; they are morphed from the field of the other faces, "
                     "extrapolated (--extrapolate)", source, what)
         return
+    if foreign:
+        raise FieldError(f"{source} covers only part of the solid: {what}; {foreign}: give this part's field "
+                         f"(the FIELD argument, batch column field)")
     raise FieldError(f"{source} covers only part of the solid: {what}; give a field over the whole part, or "
                      f"--extrapolate (Settings.extrapolate) to morph such faces from the field of the others")
 

@@ -224,6 +224,34 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     return Classification(role, owner, uv, t, foot, distance, node_distance, edge_distance, node=node)
 
 
+def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: float,
+                   threads: int = 1) -> np.ndarray:
+    """The distance ``(n,)`` (mm) of each of ``points (n, 3)`` to the nearest face of ``part`` where it is within
+    ``reach``, inf elsewhere: a quick look at where points lie, for the checks of a field before the morph.
+
+    The candidate faces and Newton's foot points are :func:`classify_nodes`' (foot points inside the face's
+    trimmed domain or on its border); nothing is asked of the kernel, so a point Newton leaves open, or whose
+    nearest point is on an edge that its faces' foot points miss, comes back farther (inf) than it is.
+    """
+    points = np.asarray(points, float).reshape(-1, 3)
+    best = np.full(len(points), np.inf)
+    if not len(points):
+        return best
+    cloud, cloud_face, apart = _face_cloud(part, projector, len(points))
+    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
+    spacing = START_SPACING * part.diagonal
+    faces = [(k, pair_node[group]) for k, group in runs(pair_face)]
+    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], spacing,
+                                                projector.face_box(job[0])), faces, threads,
+                       cost=[len(nodes) for _, nodes in faces])
+    for (k, nodes), fp in zip(faces, feet):
+        near = fp.settled & (fp.distance <= reach) & (fp.distance < best[nodes])
+        inside = np.zeros(len(nodes), bool)
+        inside[near] = projector.classify(k, fp.uv[near]) != Trim.OUTSIDE
+        best[nodes[inside]] = fp.distance[inside]
+    return best
+
+
 #: Starts a node looks among for one on the far side of a thin edge (:func:`_foot_points`).
 _FAR_SIDE_STARTS = 16
 
