@@ -149,4 +149,9 @@ def test_a_grid_point_is_vouched_for_only_where_the_nodes_tell_it_is_within_the_
     off = np.array([5e-4, 5e-4, 3e-3, 5e-4, 0.0])
     # within; may be beyond (uncertain estimate); beyond; may be beyond (the estimate misses its nodes); far
     assert grid.unmeasured(off, 1e-3).tolist() == [False, True, True, True, True]
+    # and within the limit by less than the grid can resolve between its points
+    from hot2cold.pipeline.checks import VOUCH_SHARE
+
+    near_limit = np.array([(VOUCH_SHARE + 0.01) * 1e-3 - 1e-4, 0.0, 0.0, 0.0, 0.0])
+    assert grid.unmeasured(near_limit, 1e-3)[0]
     assert not grid.unmeasured(off, np.inf)[:4].any()
