@@ -198,6 +198,28 @@ def make_field(kind: str, lo: np.ndarray, hi: np.ndarray, surface: np.ndarray):
 
 # ----------------------------------------------------------------------------------------------- the cases
 
+#: Mistakes a user makes with a right field (node positions ``x``, hot-to-cold displacements ``d``): what the
+#: field file then holds.
+MISTAKES = {
+    "cold_positions": "the cold positions x + d with the displacements d",
+    "cold_to_hot": "the cold positions x + d with the cold-to-hot displacements -d",
+    "metres": "positions and displacements in metres",
+    "other_part": "another part's field (the twisted blade's on the filleted block)",
+}
+
+
+def make_mistake(kind: str, points: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The field ``points (N, 3)``, ``values (N, 3)`` as the mistake ``kind`` writes it."""
+    if kind == "cold_positions":
+        return points + values, values
+    if kind == "cold_to_hot":
+        return points + values, -values
+    if kind == "metres":
+        return points * 1e-3, values * 1e-3
+    raise ValueError(f"unknown mistake {kind!r}")
+
+
+
 @dataclass(frozen=True)
 class Case:
     """One hard case; see the module docstring."""
@@ -211,6 +233,7 @@ class Case:
     volume: int = 0                 # volume nodes inside the part
     volume_margin: float = 0.02     # mm, the least distance of a volume node from the surface
     args: tuple = ()                # extra morph options
+    mistake: str = ""               # a user's mistake made of the field (:data:`MISTAKES`), or none
     why: str = ""
 
 
@@ -238,6 +261,14 @@ CASES = {
                                  volume_margin=0.05, why="mixer, hot spot, noisy values, volume nodes"),
     "rotor37_clamped_noise": Case("rotor37_blade.step", "fe", "clamped", sigma_value=1e-4,
                                   why="rotor blade, clamped, noisy values"),
+    # the mistakes: each should be refused (exit 2) in a few seconds, named for what it is, nothing written
+    "mixup_cold_positions": Case("twisted_blade.step", "fe", "smooth", mistake="cold_positions",
+                                 why=MISTAKES["cold_positions"]),
+    "mixup_cold_to_hot": Case("twisted_blade.step", "fe", "smooth", mistake="cold_to_hot",
+                              why=MISTAKES["cold_to_hot"]),
+    "field_in_metres": Case("twisted_blade.step", "fe", "smooth", mistake="metres", why=MISTAKES["metres"]),
+    "other_part_field": Case("filleted_block.step", "fe", "smooth", mistake="other_part",
+                             why=MISTAKES["other_part"]),
 }
 
 
@@ -262,6 +293,7 @@ class Result:
     limit: float = TOLERANCE                # the tolerance plus the true scatter's allowance
     seconds: float = 0.0
     peak_mb: float = 0.0
+    written: list[str] = field(default_factory=list)     # the files the morph left (none on a refusal)
 
     @property
     def silent_miss(self) -> bool:
@@ -315,6 +347,13 @@ def run_case(name: str, workdir: Path) -> Result:
     values = analytic(points)
     if case.sigma_value:
         values = values + rng.normal(0.0, case.sigma_value, values.shape)
+    if case.mistake == "other_part":
+        blade = read_step(SAMPLES / "twisted_blade.step")
+        blade_lo, blade_hi = rp.box(blade)
+        points = rp.node_set(blade, "fe", spacing)
+        values = make_field(case.field, blade_lo, blade_hi, points)(points)
+    elif case.mistake:
+        points, values = make_mistake(case.mistake, points, values)
     result.nodes = len(points)
     result.limit = TOLERANCE + noise_allowance(case.sigma_value, len(points))
     field_path, cold_path, report_path = workdir / "field.npz", workdir / "cold.step", workdir / "report.json"
@@ -328,6 +367,7 @@ def run_case(name: str, workdir: Path) -> Result:
     result.seconds = time.perf_counter() - start
     result.peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     result.message = rp.one_line(stderr.getvalue()).replace(f"{workdir}/", "")
+    result.written = sorted(p.name for p in (cold_path, report_path) if p.exists())
     if report_path.exists():
         data = json.loads(report_path.read_text())
         result.met = data.get("tolerance_met")
@@ -391,7 +431,8 @@ def table(results: list[Result]) -> str:
                  f"{sum(r.exit_code == 5 for r in results)} exit 5, silent misses: {misses}")
     for r in results:
         if r.exit_code not in (0, 5):
-            lines.append(f"- {r.case}: exit {r.exit_code}: {r.message}")
+            written = "" if not r.written else f" (written: {', '.join(r.written)})"
+            lines.append(f"- {r.case} ({r.why}): exit {r.exit_code} after {r.seconds:.1f} s{written}: {r.message}")
     return "\n".join(lines)
 
 
