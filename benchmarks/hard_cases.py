@@ -56,15 +56,30 @@ SEED = 0
 
 # ---------------------------------------------------------------------------------------------- the fields
 
+class _Field:
+    """An analytic field: ``self(p)`` the displacements ``(N, 3)`` at ``p (N, 3)`` (mm)."""
+
+    def exact_map(self, p: np.ndarray) -> np.ndarray:
+        """The exact cold positions ``(N, 3)`` of the hot points ``p (N, 3)``."""
+        return p + self(p)
+
+
 @dataclass(frozen=True)
-class Bend:
-    """A blade bent about its span: the tip moves ``amp`` mm along ``side``, plane sections stay plane (the
-    span displacement is linear through the wall, so volume nodes carry other values than the surface's)."""
+class _Blade(_Field):
+    """A field over a part of bounding box ``lo``, ``hi`` (3,), its ``span`` the longest direction and ``side``
+    the one it bends in."""
 
     lo: np.ndarray
     hi: np.ndarray
     span: int
     side: int
+
+
+@dataclass(frozen=True)
+class Bend(_Blade):
+    """A blade bent about its span: the tip moves ``amp`` mm along ``side``, plane sections stay plane (the
+    span displacement is linear through the wall, so volume nodes carry other values than the surface's)."""
+
     amp: float
 
     def __call__(self, p: np.ndarray) -> np.ndarray:
@@ -76,20 +91,14 @@ class Bend:
         d[:, self.span] = -self.amp * 2.0 * z / length * (p[:, self.side] - mid)
         return d
 
-    def exact_map(self, p: np.ndarray) -> np.ndarray:
-        return p + self(p)
 
 
 @dataclass(frozen=True)
-class WallGradient:
+class WallGradient(_Blade):
     """A temperature difference across a thin wall: the wall bends and thickens, the displacement along the
     thickness direction ``side`` quadratic in that coordinate (``amp`` mm at the wall's faces, relative to its
     mid-plane ``mid``), times a smooth profile along the span."""
 
-    lo: np.ndarray
-    hi: np.ndarray
-    span: int
-    side: int
     amp: float
 
     def __call__(self, p: np.ndarray) -> np.ndarray:
@@ -103,12 +112,10 @@ class WallGradient:
         d[:, self.span] = self.amp * 0.3 * s * z
         return d
 
-    def exact_map(self, p: np.ndarray) -> np.ndarray:
-        return p + self(p)
 
 
 @dataclass(frozen=True)
-class ThermalFront:
+class ThermalFront(_Field):
     """A sharp thermal front across the span at ``z0`` (width ``width`` mm): the strain ``strain`` on its hot
     side, none on the other; the displacement is the strain integrated (a smooth step of the slope)."""
 
@@ -129,19 +136,13 @@ class ThermalFront:
         d[:, self.span] = ramp
         return d
 
-    def exact_map(self, p: np.ndarray) -> np.ndarray:
-        return p + self(p)
 
 
 @dataclass(frozen=True)
-class Clamped:
+class Clamped(_Blade):
     """A flank clamped below ``z0``: nothing moves there, above it the part swings by ``amp`` mm at the far end,
     quadratic in the distance from the clamp (the field's curvature jumps at ``z0``)."""
 
-    lo: np.ndarray
-    hi: np.ndarray
-    span: int
-    side: int
     amp: float
     at: float = 0.3
 
@@ -152,12 +153,10 @@ class Clamped:
         d[:, self.side] = self.amp * t ** 2
         return d
 
-    def exact_map(self, p: np.ndarray) -> np.ndarray:
-        return p + self(p)
 
 
 @dataclass(frozen=True)
-class HotSpot:
+class HotSpot(_Field):
     """A hot spot: thermal expansion about the part's centre, ``strain`` at a Gaussian spot of radius
     ``radius`` mm around ``spot`` and a tenth of it elsewhere."""
 
@@ -170,8 +169,6 @@ class HotSpot:
         w = 0.1 + 0.9 * np.exp(-np.sum((p - self.spot) ** 2, axis=1) / self.radius ** 2)
         return self.strain * w[:, None] * (p - self.centre)
 
-    def exact_map(self, p: np.ndarray) -> np.ndarray:
-        return p + self(p)
 
 
 def make_field(kind: str, lo: np.ndarray, hi: np.ndarray, surface: np.ndarray):
