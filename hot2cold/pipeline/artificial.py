@@ -168,8 +168,7 @@ class FieldEstimator:
         k = min(self._k + 1, len(self._points))
         if k < 5:                       # too few others for a linear fit: the nearest other's displacement
             _, idx = self._tree.query(self._points[rows], k=min(2, len(self._points)))
-            idx = np.atleast_2d(idx)
-            return self._disp[idx[:, -1]]
+            return self._disp[np.reshape(idx, (len(rows), -1))[:, -1]]
         _, idx = self._tree.query(self._points[rows], k=k)
         valid = idx != rows[:, None]
         valid[valid.all(axis=1), -1] = False            # a duplicate point took its place: drop the farthest
