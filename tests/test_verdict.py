@@ -326,6 +326,26 @@ def test_a_missed_tolerance_run_says_not_met_first_in_every_output(tmp_path, ben
     assert re.search(r"\d+ ignored: farther than [\d.e-]+ mm \(--node-distance\) from every face", nodes_line)
 
 
+def test_a_missed_tolerance_run_without_a_report_leaves_one_beside_its_part(tmp_path, bent_cube, capsys):
+    """Exit 5 with no --report: the report is written beside the cold STEP all the same, the one-line message
+    names it, and it says NOT met first; a run that meets its tolerance writes no file it was not asked for."""
+    from hot2cold.cli import main
+
+    step, field = bent_cube
+    out = tmp_path / "cold.step"
+    code = main(["morph", str(step), str(field), "-o", str(out), "--tolerance", "1e-4", "--max-refinements", "0"])
+    beside = tmp_path / "cold.report.json"
+    captured = capsys.readouterr()
+    assert code == 5 and out.is_file() and beside.is_file()
+    assert json.loads(beside.read_text(encoding="utf-8"))["verdict"]["state"] == "NOT met"
+    assert f"wrote {beside}: the report" in captured.out and str(beside) in captured.err.splitlines()[-1]
+
+    met = tmp_path / "met"
+    met.mkdir()
+    assert main(["morph", str(step), str(field), "-o", str(met / "cold.step"), "-q"]) == 0
+    assert sorted(p.name for p in met.iterdir()) == ["cold.step"]
+
+
 def test_a_batch_job_that_misses_carries_the_verdict_beside_its_part(tmp_path, bent_cube):
     """A batch job without a report: its record beside the cold STEP starts with the verdict, its result and
     the summary's row say NOT met, and a rerun skipped keeps it."""

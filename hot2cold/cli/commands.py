@@ -10,7 +10,7 @@ nor another output) and written whole or not at all.
 Exit codes: 0 success; 2 unusable input (file, field, option, output path; README "Bad input" lists them);
 3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself, or its STEP file
 does not read back as the valid closed solids written (nothing written but the report); 5 written, but
---tolerance not met; 6 an output could not be written (none of it is left; the message says what else is written); 70
+--tolerance not met (the report written too, beside the STEP as COLD.report.json when --report was not given); 6 an output could not be written (none of it is left; the message says what else is written); 70
 internal error; 130 interrupted.
 
 Exit codes of batch: 0 every job ok or skipped (done before from the same inputs); 1 a job failed (the
@@ -232,6 +232,9 @@ def _morph(args) -> int:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
         print(result.report.table())    # the verdict its first line
+    missed = tolerance_missed(result)
+    if missed and args.report is None:  # a part that misses its tolerance is not left without its verdict
+        args.report = Path(args.output).with_suffix(".report.json")
     written = args.written = []         # for the messages of a failure or an interruption from here on
     what = {path: name for name, path in _outputs(args)}
     try:
@@ -245,9 +248,8 @@ def _morph(args) -> int:
                 print(_wrote(path, what.get(path, "")))
     except OutputError as exc:
         raise OutputError(f"{exc} ({', '.join(map(str, written)) or 'nothing'} written)") from exc
-    missed = tolerance_missed(result)
     if missed:
-        print(f"hot2cold: {missed}", file=sys.stderr)
+        print(f"hot2cold: {missed}; the verdict and every figure: {args.report}", file=sys.stderr)
         return 5
     return 0
 
