@@ -10,7 +10,8 @@ nor another output) and written whole or not at all.
 Exit codes: 0 success; 2 unusable input (file, field, option, output path; README "Bad input" lists them);
 3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself, or its STEP file
 does not read back as the valid closed solids written (nothing written but the report); 5 written, but
---tolerance not met (the report written too, beside the STEP as COLD.report.json when --report was not given); 6 an output could not be written (none of it is left; the message says what else is written); 70
+--tolerance not met (the report written too, beside the STEP as COLD.report.json when --report was not
+given); 6 an output could not be written (none of it is left; the message says what else is written); 70
 internal error; 130 interrupted.
 
 Exit codes of batch: 0 every job ok or skipped (done before from the same inputs); 1 a job failed (the
