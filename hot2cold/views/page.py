@@ -26,7 +26,7 @@ from . import pictures
 from .scene import build_scene
 from .viewer import STYLE as _VIEWER_STYLE, viewer_html
 from ..io.atomic import write_atomically
-from ..pipeline.report import UNSUPPORTED_SHARE, Tone
+from ..pipeline.report import Tone
 
 log = logging.getLogger(__name__)
 
@@ -126,8 +126,7 @@ def _summary(report) -> str:
     unmeasured = len(verdict.unmeasured_faces)
     items += [
         ("area measured", _e(verdict.measured_text) + (f" ({unmeasured} {'face' if unmeasured == 1 else 'faces'} "
-                                                       f"more than {100 * UNSUPPORTED_SHARE:g} % unmeasured)"
-                                                       if unmeasured else "")),
+                                                       f"partly unmeasured)" if unmeasured else "")),
         ("hot part", _e(report.hot or "–")),
         ("field", _e(report.field or "–")),
         ("cold part", _flag(report.valid, "valid", "INVALID", green) + ", "
