@@ -651,8 +651,9 @@ class FaceGrid:
         turn (:meth:`~hot2cold.pipeline.artificial.FieldEstimator.left_out`); 0 where not ``near`` and where
         the field's elements tell it.  The slack is the estimate's miss at nodes it was fitted to, and bounds
         the error between the nodes from below; this bounds it from above, at a node's spacing from the others
-        (a sharp thermal front across a thin blade's edge: the estimate 5e-3 mm off the field, its misses at
-        the nodes it holds 5e-4).  None: zeros.
+        (where the field changes faster than the nodes resolve, a sharp thermal front across a thin blade's
+        edge, the estimate misses the field between the nodes by far more than the nodes it was fitted to).
+        None: zeros.
     """
 
     uv: np.ndarray
