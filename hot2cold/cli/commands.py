@@ -214,7 +214,7 @@ def _morph(args) -> int:
     from threadpoolctl import threadpool_limits
 
     from .batch import cores
-    from .run import run_morph, tolerance_missed, write_cold
+    from .run import run_morph, tolerance_missed, write_cold, write_json
 
     check_input_file(args.hot, "STEP file")            # refused before anything is loaded
     check_input_file(args.field, "field file")
@@ -234,8 +234,6 @@ def _morph(args) -> int:
     if not args.quiet:
         print(result.report.table())    # the verdict its first line
     missed = tolerance_missed(result)
-    if missed and args.report is None:  # a part that misses its tolerance is not left without its verdict
-        args.report = Path(args.output).with_suffix(".report.json")
     written = args.written = []         # for the messages of a failure or an interruption from here on
     what = {path: name for name, path in _outputs(args)}
     try:
@@ -243,6 +241,12 @@ def _morph(args) -> int:
             written.append(path)
             if not args.quiet:
                 print(_wrote(path, what.get(path, "")))
+        if missed and args.report is None:  # a part written off its tolerance is not left without its verdict
+            args.report = Path(args.output).with_suffix(".report.json")
+            write_json(result.report.to_dict(), args.report)
+            written.append(args.report)
+            if not args.quiet:
+                print(_wrote(args.report, "report"))
         for path in _write_exports(args, result):
             written.append(path)
             if not args.quiet:
