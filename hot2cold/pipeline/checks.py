@@ -743,26 +743,22 @@ class _FaceNodes:
     def slack(self, points: np.ndarray) -> np.ndarray:
         """The slack ``(m,)`` (mm) of ``points (m, 3)`` near the nodes: the largest miss of :attr:`local` at their
         ``_SLACK_NODES`` nearest nodes (:attr:`FaceGrid.slack`)."""
-        if not len(points):
-            return np.zeros(0)
-        closest = self.tree.query(points, k=min(_SLACK_NODES, len(self.nodes)), workers=-1)[1]
-        closest = closest.reshape(len(points), -1)
-        # the estimate's misses at those nodes only (a face's grid is sparser than its nodes)
-        asked, at = np.unique(closest, return_inverse=True)
-        return self.misses(asked)[at.reshape(closest.shape)].max(axis=1)
+        return self._largest_nearby(points, self.misses)
 
     def uncertainty(self, points: np.ndarray) -> np.ndarray:
         """The uncertainty ``(m,)`` (mm) of the estimate at ``points (m, 3)`` near the nodes: the largest miss of
         :attr:`local` at their ``_SLACK_NODES`` nearest nodes, each left out of it (:attr:`FaceGrid.uncertainty`)."""
+        return self._largest_nearby(points, self.left_out_misses)
+
+    def _largest_nearby(self, points: np.ndarray, misses: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """The largest of ``misses`` ``(m,)`` (mm) at the ``_SLACK_NODES`` nearest nodes of ``points (m, 3)``;
+        ``misses(asked)`` is asked for those nodes only (a face's grid is sparser than its nodes)."""
         if not len(points):
             return np.zeros(0)
         closest = self.tree.query(points, k=min(_SLACK_NODES, len(self.nodes)), workers=-1)[1]
         closest = closest.reshape(len(points), -1)
         asked, at = np.unique(closest, return_inverse=True)
-        new = asked[np.isnan(self._left_out[asked])]
-        if len(new):
-            self._left_out[new] = np.linalg.norm(self.local.left_out(new) - self._displacements[new], axis=1)
-        return self._left_out[asked][at.reshape(closest.shape)].max(axis=1)
+        return misses(asked)[at.reshape(closest.shape)].max(axis=1)
 
     def misses(self, asked: np.ndarray) -> np.ndarray:
         """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``)."""
@@ -770,6 +766,14 @@ class _FaceNodes:
         if len(new):
             self._misses[new] = np.linalg.norm(self.local(self._foot[new]) - self._displacements[new], axis=1)
         return self._misses[asked]
+
+    def left_out_misses(self, asked: np.ndarray) -> np.ndarray:
+        """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``), each
+        left out of it (:meth:`~hot2cold.pipeline.artificial.FieldEstimator.left_out`)."""
+        new = asked[np.isnan(self._left_out[asked])]
+        if len(new):
+            self._left_out[new] = np.linalg.norm(self.local.left_out(new) - self._displacements[new], axis=1)
+        return self._left_out[asked]
 
 
 class FaceNodes:
