@@ -20,7 +20,6 @@ from math import comb as _comb
 
 import numpy as np
 import scipy.sparse as _sparse
-from scipy.interpolate import BSpline as _SciBSpline
 
 
 def _as_float_array(a, name: str, ndim: int) -> np.ndarray:
@@ -141,7 +140,7 @@ class BSplineSurface:
 # ----------------------------------------------------------------------------------------------------------
 # Evaluation: basis matrices and points.
 #
-# Every basis matrix here is built from ``scipy.interpolate.BSpline.design_matrix`` and kept internally in a
+# Every basis matrix here is built by the Cox-de Boor triangle (:func:`_triangle`) and kept internally in a
 # fixed-width row form: row ``r`` has ``degree + 1`` consecutive non-zero columns starting at ``start[r]``
 # (the knot span of the parameter), with values ``vals[r, :]``.  That makes rational weighting, derivatives
 # and the row-wise Kronecker product of a surface plain vectorised numpy on (m, degree + 1) arrays; the
@@ -175,6 +174,41 @@ def _parameters(t, lo: float, hi: float, name: str) -> np.ndarray:
     return np.clip(arr, lo, hi)
 
 
+def _spans(x: np.ndarray, knots: np.ndarray, degree: int) -> np.ndarray:
+    """The knot span ``s (m,)`` of each parameter ``x (m,)`` (in the domain): ``knots[s] <= x < knots[s + 1]``,
+    the span to the right at an inner knot, the last non-empty span at the domain's end (as
+    ``scipy.interpolate.BSpline.design_matrix`` picks them)."""
+    n = len(knots) - degree - 1
+    s = np.clip(np.searchsorted(knots, x, side="right") - 1, degree, n - 1)
+    empty = knots[s] >= knots[s + 1]
+    while np.any(empty):                    # the end of the domain after an end knot of too high a multiplicity
+        s = np.where(empty, s - 1, s)
+        empty = knots[s] >= knots[s + 1]
+    return s
+
+
+def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The non-zero B-splines of every degree ``lowest .. degree`` at ``x (m,)`` by the Cox-de Boor triangle
+    (The NURBS Book, A2.2), vectorised over ``x``: the span ``s (m,)`` of each parameter and, per degree
+    ``d``, the values ``(m, d + 1)`` of the degree-``d`` B-splines ``s - d .. s`` on ``knots``."""
+    s = _spans(x, knots, degree)
+    rows = [np.ones_like(x)]
+    left, right = [None], [None]
+    out = [np.ones((len(x), 1))] if lowest == 0 else []
+    for j in range(1, degree + 1):
+        left.append(x - knots[s + 1 - j])
+        right.append(knots[s + j] - x)
+        saved = np.zeros_like(x)
+        for r in range(j):
+            temp = rows[r] / (right[r + 1] + left[j - r])
+            rows[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        rows.append(saved)
+        if j >= lowest:
+            out.append(np.column_stack(rows))
+    return s, out
+
+
 def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[np.ndarray, list[np.ndarray]]:
     """Basis values and the derivatives ``1..nu`` in fixed-width row form.
 
@@ -184,31 +218,24 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[
 
     Derivatives use the knot-difference identity: the ``k``-th derivative of a degree-``p`` spline on knots
     ``t`` is a degree-``(p - k)`` spline on ``t[k:-k]``, whose coefficients are repeated scaled differences
-    ``d (c_{j+1} - c_j) / (T[j+d+1] - T[j+1])`` of the original ones.  So the degree-``(p - k)`` design matrix
-    (again from ``design_matrix``) is multiplied by ``k`` bidiagonal difference matrices, done here row-wise.
+    ``d (c_{j+1} - c_j) / (T[j+d+1] - T[j+1])`` of the original ones.  So the degree-``(p - k)`` rows (from the
+    same Cox-de Boor triangle, :func:`_triangle`) are multiplied by ``k`` bidiagonal difference matrices, done
+    here row-wise.
     """
     p = degree
     m = x.shape[0]
     n = len(knots) - p - 1
     if m == 0:
         return np.zeros(0, dtype=np.int64), [np.zeros((0, p + 1)) for _ in range(nu + 1)]
+    span, lower = _triangle(x, knots, p, max(p - nu, 0))          # lower[i]: degree max(p - nu, 0) + i
+    start = span - p
     out = []
-    start = None
     for k in range(nu + 1):
         if k > p:
             out.append(np.zeros((m, p + 1)))
             continue
         d0 = p - k
-        tk = knots[k:len(knots) - k] if k else knots
-        # x is in the domain already (see _parameters); extrapolate=True only skips scipy's own range check,
-        # which iterates over x in Python (half the time of the call).
-        dm = _SciBSpline.design_matrix(x, tk, d0, extrapolate=True)
-        vals = np.asarray(dm.data, dtype=float).reshape(m, d0 + 1)
-        s = np.asarray(dm.indices[::d0 + 1], dtype=np.int64)
-        if start is None:
-            start = s
-        elif not np.array_equal(s, start):  # cannot happen for a valid clamped knot vector
-            raise RuntimeError("inconsistent knot spans between basis degrees")
+        vals = lower[d0 - max(p - nu, 0)]
         # Raise the degree-d0 row back to the degree-p index space: multiply by Diff_d, d = d0+1 .. p.
         for d in range(d0 + 1, p + 1):
             td = knots[p - d:len(knots) - (p - d)]
@@ -291,7 +318,7 @@ def curve_derivative_basis(curve: BSplineCurve, t, nu: int = 1) -> _sparse.csr_a
     :func:`curve_basis`; ``nu > degree`` gives zeros for a non-rational curve.
 
     At a knot where the curve is only C^(nu-1) the derivative is the one of the span to the right (at the
-    domain end: of the last span), as ``design_matrix`` picks spans.
+    domain end: of the last span), as :func:`_spans` picks them.
     """
     if int(nu) != nu or nu < 0:
         raise ValueError(f"nu must be a non-negative integer, got {nu!r}")
@@ -412,9 +439,26 @@ def clip_uv(surface: BSplineSurface, uv: np.ndarray) -> np.ndarray:
     return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
 
 
+#: Rows combined with their poles at once by :func:`_combine` (bounds its ``(rows, width, 3)`` gather).
+_ROWS_AT_ONCE = 16_384
+
+
+def _combine(cols: np.ndarray, vals: list[np.ndarray], poles: np.ndarray) -> list[np.ndarray]:
+    """``B @ poles`` for each fixed-width basis ``B`` of ``vals`` (each ``(m, w)``, the columns ``cols (m, w)``)
+    and ``poles (n, 3)``: the points or derivatives ``(m, 3)``, without building a sparse matrix (whose
+    construction costs more than the sum for the few rows most calls have)."""
+    out = [np.empty((len(cols), poles.shape[1])) for _ in vals]
+    for a in range(0, len(cols), _ROWS_AT_ONCE):
+        near = poles[cols[a:a + _ROWS_AT_ONCE]]                       # (rows, w, 3)
+        for x, o in zip(vals, out):
+            np.einsum("mw,mwk->mk", x[a:a + _ROWS_AT_ONCE], near, out=o[a:a + _ROWS_AT_ONCE])
+    return out
+
+
 def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
     """Points ``C(t)`` (m, 3) of ``curve`` at parameters ``t`` (m,)."""
-    return curve_basis(curve, t) @ curve.poles
+    start, (vals,) = _curve_rows(curve, t, 0)
+    return _combine(start[:, None] + np.arange(curve.degree + 1), [vals], curve.poles)[0]
 
 
 def polyline_length(points: np.ndarray) -> float:
@@ -424,14 +468,15 @@ def polyline_length(points: np.ndarray) -> float:
 
 def evaluate_surface(surface: BSplineSurface, u, v) -> np.ndarray:
     """Points ``S(u, v)`` (m, 3) of ``surface`` at parameters ``u``, ``v`` (m,)."""
-    return surface_basis(surface, u, v) @ surface.poles.reshape(-1, 3)
+    cols, vals = _surface_rows(surface, u, v, 0)
+    return _combine(cols, vals, surface.poles.reshape(-1, 3))[0]
 
 
 def surface_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray]:
     """First partial derivatives ``(S_u (m, 3), S_v (m, 3))`` at parameters ``u``, ``v`` (m,)."""
-    du, dv = surface_derivative_bases(surface, u, v)
-    flat = surface.poles.reshape(-1, 3)
-    return du @ flat, dv @ flat
+    cols, (_, du, dv) = _surface_rows(surface, u, v, 1)
+    su, sv = _combine(cols, [du, dv], surface.poles.reshape(-1, 3))
+    return su, sv
 
 
 def surface_first_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -439,8 +484,7 @@ def surface_first_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.nda
     :func:`evaluate_surface` and :func:`surface_derivatives` from one evaluation of the basis rows, summed
     over each row's ``(p + 1)(q + 1)`` poles without a sparse matrix (Gauss-Newton's inner loop)."""
     cols, vals = _surface_rows(surface, u, v, 1)
-    near = surface.poles.reshape(-1, 3)[cols]                     # (m, (p + 1)(q + 1), 3)
-    return tuple(np.einsum("mw,mwk->mk", x, near) for x in vals)
+    return tuple(_combine(cols, vals, surface.poles.reshape(-1, 3)))
 
 
 #: Relative tolerance of :func:`surface_normals`: a first derivative is taken as zero where it is below
@@ -452,12 +496,12 @@ NORMAL_RTOL = 1e-12
 def _normal_parts(surface: BSplineSurface, u, v):
     """``S_u x S_v`` (m, 3), ``|S_u|``, ``|S_v|`` (m,) and the rounding noise (mm, (m,)) of each derivative's
     sum, ``NORMAL_RTOL * sum_i |dB_i| * max |pole|``."""
-    du, dv = surface_derivative_bases(surface, u, v)
+    cols, (_, du, dv) = _surface_rows(surface, u, v, 1)
     flat = surface.poles.reshape(-1, 3)
-    su, sv = du @ flat, dv @ flat
+    su, sv = _combine(cols, [du, dv], flat)
     size = float(np.abs(flat).max()) if flat.size else 0.0
-    noise_u = NORMAL_RTOL * size * np.asarray(abs(du).sum(axis=1)).ravel()
-    noise_v = NORMAL_RTOL * size * np.asarray(abs(dv).sum(axis=1)).ravel()
+    noise_u = NORMAL_RTOL * size * np.abs(du).sum(axis=1)
+    noise_v = NORMAL_RTOL * size * np.abs(dv).sum(axis=1)
     return np.cross(su, sv), np.linalg.norm(su, axis=1), np.linalg.norm(sv, axis=1), noise_u, noise_v
 
 

@@ -63,12 +63,16 @@ class TangentEdge:
         face's surface the edge runs along as a whole and whether it runs against the side's direction (see
         :func:`hot2cold.core.model.side_along`); None when the edge is not a whole side.
     hot_angle_max : float, largest angle in degrees between the two faces' normal lines along the edge.
+    measurable : ``(m,)`` bool or None, :func:`hot_defined` at the edge's own samples (the matched parameters
+        of its two uses), found once for the hot faces that every later measure of the edge compares; None:
+        found at each measure.
     """
 
     edge: int
     faces: tuple[int, int]
     sides: tuple[tuple[Side, bool] | None, tuple[Side, bool] | None]
     hot_angle_max: float
+    measurable: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,10 +181,11 @@ def edge_kinks(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge, uv
     samples (``uv``: the matching parameters, default the edges' own samples), NaN where a hot normal is
     undefined (:func:`hot_defined`)."""
     fa, fb = edge.faces
-    uv_a, uv_b = uv if uv is not None else _matched_uv(_use_of(part.faces[fa], edge.edge),
-                                                       _use_of(part.faces[fb], edge.edge))
+    own = uv is None
+    uv_a, uv_b = _matched_uv(_use_of(part.faces[fa], edge.edge), _use_of(part.faces[fb], edge.edge)) if own else uv
     angles = kink_angles(surfaces[fa], uv_a, surfaces[fb], uv_b)
-    return np.where(hot_defined(part, edge.faces, uv_a, uv_b), angles, np.nan)
+    measurable = edge.measurable if own and edge.measurable is not None else hot_defined(part, edge.faces, uv_a, uv_b)
+    return np.where(measurable, angles, np.nan)
 
 
 def kink_added(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> float:
@@ -220,7 +225,8 @@ def tangent_edges(part: Part, angle_tol_deg: float = 1.0) -> list[TangentEdge]:
         angle = _max(kink_angles(fa.surface, uv_a, fb.surface, uv_b))
         if np.isfinite(angle) and angle < angle_tol_deg:
             out.append(TangentEdge(edge.index, (faces[0], faces[1]),
-                                   (side_along(fa.surface, use_a), side_along(fb.surface, use_b)), angle))
+                                   (side_along(fa.surface, use_a), side_along(fb.surface, use_b)), angle,
+                                   hot_defined(part, faces, uv_a, uv_b)))
     log.info("%d of %d edges are tangent (normals within %.3g deg)", len(out), len(part.edges), angle_tol_deg)
     return out
 
@@ -362,14 +368,12 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     n_points_factor = max(int(n_points_factor), 1)
     surfaces = list(face_surfaces)
 
-    matched, before, reasons = [], [], []
+    before, reasons = [], []
     tasks: list[_Task] = []
     for r, te in enumerate(edges):
         fa, fb = (part.faces[k] for k in te.faces)
         use_a, use_b = _use_of(fa, te.edge), _use_of(fb, te.edge)
-        uv_a, uv_b = _matched_uv(use_a, use_b)
-        matched.append((uv_a, uv_b))
-        before.append(_max(edge_kinks(part, surfaces, te, (uv_a, uv_b))))
+        before.append(_max(edge_kinks(part, surfaces, te)))          # at the matched samples, uv_a and uv_b
         # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
         # the side row and the second row only, whatever part of the side the edge covers.
         sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
@@ -415,9 +419,9 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         _solve_face(part.faces[k], surfaces, tied_sides[k], [t for t in tasks if t.face == k])
 
     reports = []
-    for te, (uv_a, uv_b), kb, reason in zip(edges, matched, before, reasons):
+    for te, kb, reason in zip(edges, before, reasons):
         # measured on the final surfaces for every edge: a face's other corrections may touch this one too
-        after = _max(edge_kinks(part, surfaces, te, (uv_a, uv_b)))
+        after = _max(edge_kinks(part, surfaces, te))
         reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason,
                                 "" if reason else SECOND_ROWS))
         if not reason:
