@@ -116,6 +116,7 @@ class Run:
     g2_edges: int | None = None         # of them, those curvature-continuous when hot (the report's "g2")
     g2_over: int | None = None          # how many of those end with a curvature jump above G2_LIMIT
     g2_max: float | None = None         # the largest curvature jump after the morph on them (share)
+    timings: dict[str, float] = field(default_factory=dict)   # s, the report's time of each stage
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -342,6 +343,7 @@ def run_here(path: Path, nodes_kind: str, field_name: str, workdir: Path, morph_
     if report_path.exists():
         data = json.loads(report_path.read_text())
         run.delta_max, run.unmeasured = data.get("delta_max"), data.get("unsupported_faces")
+        run.timings = data.get("timings") or {}
         run.verdict = (data.get("verdict") or {}).get("state")
         run.measured = (data.get("verdict") or {}).get("measured")
         if run.verdict not in (None, "met"):     # it vouches for none of a face with any share unmeasured
@@ -534,6 +536,47 @@ def summary(runs: list[Run]) -> str:
             f"unmeasured: {len(silent)}{' (' + ', '.join(silent) + ')' if silent else ''}")
 
 
+#: The stages of :func:`stage_table`, each the report's timings it sums ("fit": edges and faces, eq. 1-39).
+STAGES = (("read+load", ("read", "invert", "load")), ("classify", ("classify",)), ("fit", ("edges", "faces")),
+          ("refine", ("refine",)), ("G1+G2", ("g1", "g2")), ("rebuild+sew", ("rebuild", "sew")),
+          ("check", ("check",)), ("report", ("report",)))
+#: A stage other than the fit may take at most this share of a run's time (issue 36).
+STAGE_SHARE = 1 / 3
+#: A part of at most these faces and nodes morphs in at most ``STAGE_SECONDS`` (issue 36).
+STAGE_FACES, STAGE_NODES, STAGE_SECONDS = 300, 60_000, 20.0
+
+
+def stage_table(runs: list[Run]) -> str:
+    """Per run with timings: the time (s) of each of :data:`STAGES`, the total of the command (``seconds``), the
+    largest stage other than the fit and its share of the total; then the runs of parts of at most
+    :data:`STAGE_FACES` faces and :data:`STAGE_NODES` nodes over :data:`STAGE_SECONDS` or with a stage other
+    than the fit over :data:`STAGE_SHARE` of their time."""
+    head = ("part", "faces", "nodes", "field") + tuple(name for name, _ in STAGES) + ("total s", "largest other",
+                                                                                      "share")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    slow, lopsided, counted = [], [], 0
+    for r in runs:
+        if not r.timings or r.seconds is None:
+            continue
+        times = {name: sum(r.timings.get(k, 0.0) for k in keys) for name, keys in STAGES}
+        other = max((name for name in times if name != "fit"), key=times.get)
+        share = times[other] / r.seconds if r.seconds > 0 else 0.0
+        lines.append("| " + " | ".join([r.part, _num(r.faces, "d"), _num(r.nodes, "d"), r.field]
+                                       + [f"{times[name]:.2f}" for name, _ in STAGES]
+                                       + [f"{r.seconds:.1f}", other, f"{100 * share:.0f} %"]) + " |")
+        if (r.faces or 0) <= STAGE_FACES and (r.nodes or 0) <= STAGE_NODES:
+            counted += 1
+            if r.seconds > STAGE_SECONDS:
+                slow.append(f"{r.part} {r.seconds:.1f} s")
+            if share > STAGE_SHARE:
+                lopsided.append(f"{r.part} {other} {100 * share:.0f} %")
+    lines += ["", f"of {counted} runs of parts with at most {STAGE_FACES} faces and {STAGE_NODES} nodes: "
+                  f"{len(slow)} over {STAGE_SECONDS:g} s ({', '.join(slow) or 'none'}); {len(lopsided)} with a "
+                  f"stage other than the fit over {100 * STAGE_SHARE:.0f} % of the time "
+                  f"({', '.join(lopsided) or 'none'})"]
+    return "\n".join(lines)
+
+
 def select(paths: list[Path], names: str | None) -> list[Path]:
     """The parts whose file name contains one of the comma-separated ``names`` (case-insensitive)."""
     if not names:
@@ -579,6 +622,8 @@ def main(argv=None) -> int:
     if args.show:
         runs = [load(r) for path in args.show for r in json.loads(path.read_text())]
         print(scoreboard(runs))
+        print()
+        print(stage_table(runs))
         return 0
     if args.one is not None:
         run = run_here(Path(args.one), kinds[0], fields[0], args.workdir, morph_args)
@@ -600,6 +645,8 @@ def main(argv=None) -> int:
                     args.json.write_text(json.dumps([asdict(r) for r in runs], indent=1))
     print()
     print(scoreboard(runs))
+    print()
+    print(stage_table(runs))
     return 0
 
 

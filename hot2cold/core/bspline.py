@@ -189,23 +189,23 @@ def _spans(x: np.ndarray, knots: np.ndarray, degree: int) -> np.ndarray:
 
 def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int) -> tuple[np.ndarray, list[np.ndarray]]:
     """The non-zero B-splines of every degree ``lowest .. degree`` at ``x (m,)`` by the Cox-de Boor triangle
-    (The NURBS Book, A2.2), vectorised over ``x``: the span ``s (m,)`` of each parameter and, per degree
-    ``d``, the values ``(m, d + 1)`` of the degree-``d`` B-splines ``s - d .. s`` on ``knots``."""
+    (The NURBS Book, A2.2), vectorised over ``x`` and, degree by degree, over the functions: the span ``s (m,)``
+    of each parameter and, per degree ``d``, the values ``(m, d + 1)`` of the degree-``d`` B-splines
+    ``s - d .. s`` on ``knots``."""
     s = _spans(x, knots, degree)
-    rows = [np.ones_like(x)]
-    left, right = [None], [None]
-    out = [np.ones((len(x), 1))] if lowest == 0 else []
+    steps = np.arange(1, degree + 1)
+    left = x[:, None] - knots[s[:, None] + 1 - steps]             # (m, degree): x - knots[s + 1 - j]
+    right = knots[s[:, None] + steps] - x[:, None]                # (m, degree): knots[s + j] - x
+    values = np.ones((len(x), 1))
+    out = [values] if lowest == 0 else []
     for j in range(1, degree + 1):
-        left.append(x - knots[s + 1 - j])
-        right.append(knots[s + j] - x)
-        saved = np.zeros_like(x)
-        for r in range(j):
-            temp = rows[r] / (right[r + 1] + left[j - r])
-            rows[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        rows.append(saved)
+        below, above = right[:, :j], left[:, j - 1::-1]
+        temp = values / (below + above)                           # (m, j)
+        values = np.zeros((len(x), j + 1))
+        values[:, :j] = below * temp
+        values[:, 1:] += above * temp
         if j >= lowest:
-            out.append(np.column_stack(rows))
+            out.append(values)
     return s, out
 
 
