@@ -126,11 +126,30 @@ def kink_angles(surface_a: BSplineSurface, uv_a: np.ndarray, surface_b: BSplineS
     uv_b = np.asarray(uv_b, dtype=float).reshape(-1, 2)
     if uv_a.shape != uv_b.shape:
         raise ValueError(f"uv_a {uv_a.shape} and uv_b {uv_b.shape} must both be (m, 2)")
-    na = surface_normals(surface_a, uv_a[:, 0], uv_a[:, 1])
-    nb = surface_normals(surface_b, uv_b[:, 0], uv_b[:, 1])
+    return _line_angles(surface_normals(surface_a, uv_a[:, 0], uv_a[:, 1]),
+                        surface_normals(surface_b, uv_b[:, 0], uv_b[:, 1]))
+
+
+def _line_angles(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """Angles in degrees ``(m,)`` between the lines of unit normals ``na``, ``nb`` (m, 3) (:func:`kink_angles`)."""
     sin = np.linalg.norm(np.cross(na, nb), axis=1)
     cos = np.abs(np.sum(na * nb, axis=1))
     return np.degrees(np.arctan2(sin, cos))
+
+
+def _normals_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.ndarray]]) -> list[np.ndarray]:
+    """The unit normals ``(m_i, 3)`` of ``surfaces[k_i]`` at ``uv_i (m_i, 2)`` for each ``(k_i, uv_i)`` of ``asked``:
+    one evaluation per face for all that is asked of it (a call's cost is mostly its own, not its points')."""
+    rows: dict[int, list[int]] = {}
+    for i, (k, _) in enumerate(asked):
+        rows.setdefault(k, []).append(i)
+    out: list[np.ndarray] = [np.zeros((0, 3))] * len(asked)
+    for k, these in rows.items():
+        uv = np.concatenate([asked[i][1] for i in these])
+        normals = surface_normals(surfaces[k], uv[:, 0], uv[:, 1])
+        for i, n in zip(these, np.split(normals, np.cumsum([len(asked[i][1]) for i in these])[:-1])):
+            out[i] = n
+    return out
 
 
 def _use_of(face: Face, edge: int) -> EdgeUse:
@@ -192,6 +211,22 @@ def kink_added(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) ->
     """How much the morph opened the angle (degrees) between the faces of a tangent ``edge``: the largest
     kink between the morphed ``surfaces`` along it (:func:`edge_kinks`), less the hot one."""
     return _max(edge_kinks(part, surfaces, edge)) - edge.hot_angle_max
+
+
+def kink_maxima(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge]) -> np.ndarray:
+    """The largest kink (degrees) ``(len(edges),)`` between the morphed ``surfaces`` along each tangent edge of
+    ``edges`` (:func:`edge_kinks` at the edges' own samples), all at once: the normals of each face at all its
+    edges' samples in one evaluation."""
+    uvs = [_matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
+           for te in edges]
+    normals = _normals_by_face(surfaces, [(te.faces[side], uv[side]) for side in (0, 1)
+                                          for te, uv in zip(edges, uvs)])
+    out = np.empty(len(edges))
+    for r, (te, (uv_a, uv_b)) in enumerate(zip(edges, uvs)):
+        angles = _line_angles(normals[r], normals[len(edges) + r])
+        measurable = te.measurable if te.measurable is not None else hot_defined(part, te.faces, uv_a, uv_b)
+        out[r] = _max(np.where(measurable, angles, np.nan))
+    return out
 
 
 def kink_bound(hot_angle: float, noise_deg: float, strain: float) -> float:
@@ -419,9 +454,10 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         _solve_face(part.faces[k], surfaces, tied_sides[k], [t for t in tasks if t.face == k])
 
     reports = []
-    for te, kb, reason in zip(edges, before, reasons):
-        # measured on the final surfaces for every edge: a face's other corrections may touch this one too
-        after = _max(edge_kinks(part, surfaces, te))
+    # measured on the final surfaces for every edge: a face's other corrections may touch this one too
+    afters = kink_maxima(part, surfaces, edges)
+    for te, kb, reason, after in zip(edges, before, reasons, afters):
+        after = float(after)
         reports.append(G1Report(te.edge, te.faces, te.hot_angle_max, kb, after, not reason, reason,
                                 "" if reason else SECOND_ROWS))
         if not reason:

@@ -36,7 +36,7 @@ from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, ver
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners,
-                 correct_g1, edge_decided, kink_added, kink_bound, kink_misses, surface_corner_normals,
+                 correct_g1, edge_decided, kink_bound, kink_maxima, kink_misses, surface_corner_normals,
                  tangent_edges, turn_rows, with_corners)
 from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
@@ -349,12 +349,13 @@ class MorphContext:
         part = self.part
         face_morphs = list(face_morphs)
         surfaces = [f.surface for f in face_morphs]
+        largest = dict(zip((e.edge for e in self.tangent), kink_maxima(part, surfaces, self.tangent)))
         kinked = [e for e in self.tangent
-                  if kink_added(part, surfaces, e) > kink_bound(e.hot_angle_max, _KINK_NOISE_DEG, self.strain)
+                  if largest[e.edge] - e.hot_angle_max > kink_bound(e.hot_angle_max, _KINK_NOISE_DEG, self.strain)
                   or any(c.edges for c in corners if c.vertex in part.edges[e.edge].vertices)]
         # faces with kinked trimming curves: fitted again, their tangents there turned into the common plane
         along = [e for e in kinked if None in e.sides]
-        plain = {e.edge: kink_added(part, surfaces, e) + e.hot_angle_max for e in along}
+        plain = {e.edge: largest[e.edge] for e in along}
         turning = {f for e in along for f, side in zip(e.faces, e.sides) if side is None}
         kept: set[int] = set(range(len(part.faces))) - turning    # faces that keep their fits along the curves
         refits: dict[int, FaceMorph] = {}
@@ -368,8 +369,7 @@ class MorphContext:
             # a turn that leaves one of its edges more kinked than the plain fits is no correction (on the
             # vise of the real corpus, next to a corner of 4.8 deg: 36 deg after)
             trial = [refits[k].surface if k in refits else s for k, s in enumerate(surfaces)]
-            for e in along:
-                now = kink_added(part, trial, e) + e.hot_angle_max
+            for e, now in zip(along, kink_maxima(part, trial, along)):
                 if now > plain[e.edge] + _KINK_NOISE_DEG:
                     for k in set(e.faces) & set(refits) - set(off):
                         off[k] = (f"turning face {k} would kink edge {e.edge} more ({plain[e.edge]:.3g} -> "
@@ -405,9 +405,9 @@ class MorphContext:
             log.warning("G1: faces %s keep their fits: %s", sorted(off), "; ".join(off.values()))
             corrected = [surfaces[k] if k in off else c for k, c in enumerate(corrected)]
             by_edge = {te.edge: te for te in kinked}
-            reports = [r if not off.keys() & set(r.faces) else replace(
-                r, kink_after_max=kink_added(part, corrected, by_edge[r.edge]) + by_edge[r.edge].hot_angle_max)
-                for r in reports]
+            again = [r for r in reports if off.keys() & set(r.faces)]
+            now = dict(zip((r.edge for r in again), kink_maxima(part, corrected, [by_edge[r.edge] for r in again])))
+            reports = [replace(r, kink_after_max=float(now[r.edge])) if r.edge in now else r for r in reports]
         for r, report in enumerate(reports):
             if report.edge not in plain:
                 continue
@@ -444,7 +444,7 @@ class MorphContext:
         bent_faces: set[int] = set()
         refused: dict[int, str] = {}
         if settings.continuity is Continuity.G2:
-            kinks = {te.edge: kink_added(part, surfaces, te) + te.hot_angle_max for te in self.tangent}
+            kinks = dict(zip((te.edge for te in self.tangent), kink_maxima(part, surfaces, self.tangent)))
             current = list(surfaces)
             for weight in BEND_WEIGHTS:   # stiffer bend rows while the jumps stay and every face may bend
                 bend = [te for te in smooth if edge_jump(part, current, te) > settings.g2_tolerance]
@@ -459,9 +459,9 @@ class MorphContext:
                 if not refits:
                     break
             # the G1 reports are measured again where a face bent
-            reports = [r if not bent_faces & set(r.faces) else replace(
-                r, kink_after_max=kink_added(part, current, by_edge[r.edge]) + by_edge[r.edge].hot_angle_max)
-                for r in reports]
+            again = [r for r in reports if bent_faces & set(r.faces)]
+            now = dict(zip((r.edge for r in again), kink_maxima(part, current, [by_edge[r.edge] for r in again])))
+            reports = [replace(r, kink_after_max=float(now[r.edge])) if r.edge in now else r for r in reports]
             surfaces_after = current
         else:
             surfaces_after = surfaces
@@ -513,8 +513,7 @@ class MorphContext:
                    for k, refit in refits.items()}
             off = {k: why for k, why in off.items() if why}
             trial = [refits[k].surface if k in refits and k not in off else s for k, s in enumerate(current)]
-            for te in self.tangent:
-                now = kink_added(part, trial, te) + te.hot_angle_max
+            for te, now in zip(self.tangent, kink_maxima(part, trial, self.tangent)):
                 if now > max(kinks[te.edge], te.hot_angle_max + _KINK_PROMISE_DEG) + _KINK_NOISE_DEG:
                     for k in set(te.faces) & set(refits) - set(off):
                         off[k] = (f"bending face {k} would kink edge {te.edge} to {now:.3g} deg "
