@@ -513,12 +513,30 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     ``NORMAL_RTOL``).  The caller decides what to do there; :func:`normal_rounding` tells how far rounding
     may turn a normal that is defined.
     """
-    nrm, lu, lv, noise_u, noise_v = _normal_parts(surface, u, v)
+    return _unit_normals(*_normal_parts(surface, u, v))
+
+
+def _unit_normals(nrm: np.ndarray, lu: np.ndarray, lv: np.ndarray, noise_u: np.ndarray, noise_v: np.ndarray
+                  ) -> np.ndarray:
+    """:func:`surface_normals` of :func:`_normal_parts`."""
     length = np.linalg.norm(nrm, axis=1)
     ok = (lu > noise_u) & (lv > noise_v) & (length > NORMAL_RTOL * lu * lv)
     out = np.full_like(nrm, np.nan)
     out[ok] = nrm[ok] / length[ok, None]
     return out
+
+
+def _rounding(lu: np.ndarray, lv: np.ndarray, noise_u: np.ndarray, noise_v: np.ndarray) -> np.ndarray:
+    """:func:`normal_rounding` of :func:`_normal_parts`."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((lu > 0) & (lv > 0), noise_u / lu + noise_v / lv, np.inf)
+
+
+def normals_and_rounding(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`surface_normals` ``(m, 3)`` and :func:`normal_rounding` ``(m,)`` at parameters ``u``, ``v`` (m,) from one
+    evaluation of the first derivatives."""
+    nrm, lu, lv, noise_u, noise_v = _normal_parts(surface, u, v)
+    return _unit_normals(nrm, lu, lv, noise_u, noise_v), _rounding(lu, lv, noise_u, noise_v)
 
 
 def normal_rounding(surface: BSplineSurface, u, v) -> np.ndarray:
@@ -532,8 +550,7 @@ def normal_rounding(surface: BSplineSurface, u, v) -> np.ndarray:
     estimate gives 0.9 deg there.
     """
     _, lu, lv, noise_u, noise_v = _normal_parts(surface, u, v)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where((lu > 0) & (lv > 0), noise_u / lu + noise_v / lv, np.inf)
+    return _rounding(lu, lv, noise_u, noise_v)
 
 
 def knot_breaks(knots: np.ndarray, degree: int) -> np.ndarray:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import sparse
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, normal_rounding,
+from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, normals_and_rounding,
                             surface_derivative_bases, surface_normals)
 from ..core.lstsq import solve_tsvd
 from ..core.model import EdgeUse, Face, Part, Side, side_along
@@ -188,10 +188,11 @@ def hot_defined(part: Part, faces: tuple[int, int], uv_a: np.ndarray, uv_b: np.n
     deg at a corner (|S_u| 1e-7 mm against |S_v| 25), within 6e-6 mm of it.  Measures of the morphed faces
     leave those points out."""
     fa, fb = (part.faces[k].surface for k in faces)
+    uv_a, uv_b = (np.asarray(uv, dtype=float).reshape(-1, 2) for uv in (uv_a, uv_b))
+    na, rounding_a = normals_and_rounding(fa, uv_a[:, 0], uv_a[:, 1])
+    nb, rounding_b = normals_and_rounding(fb, uv_b[:, 0], uv_b[:, 1])
     bound = np.radians(MEASURABLE_DEG)
-    return (np.isfinite(kink_angles(fa, uv_a, fb, uv_b))
-            & (normal_rounding(fa, uv_a[:, 0], uv_a[:, 1]) <= bound)
-            & (normal_rounding(fb, uv_b[:, 0], uv_b[:, 1]) <= bound))
+    return np.isfinite(_line_angles(na, nb)) & (rounding_a <= bound) & (rounding_b <= bound)
 
 
 def edge_kinks(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge, uv: tuple | None = None
