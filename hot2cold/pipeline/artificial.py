@@ -154,13 +154,13 @@ class FieldEstimator:
                 out[start + flat] = self._spanning(xs[flat])
         return out
 
-    def left_out(self, rows: np.ndarray) -> np.ndarray:
-        """Estimates ``(m, 3)`` at the foot points ``rows (m,)`` (indices into ``points``) from the others:
-        the linear fit plus the trusted share of the quadratic correction over the ``k`` nearest foot points
-        but the point itself (:meth:`__call__`'s fit, its wider neighbourhoods aside).  How far they miss the
-        points' own displacements tells how well the estimate knows the field at a node's spacing from the
-        nodes: little where the field is smooth at that scale, much where it changes faster than the nodes
-        resolve (a sharp thermal front, a kink) or scatters."""
+    def left_out(self, rows: np.ndarray, chunk: int = 4096) -> np.ndarray:
+        """Estimates ``(m, 3)`` at the foot points ``rows (m,)`` (indices into ``points``) from the others,
+        ``chunk`` rows at a time: the linear fit plus the trusted share of the quadratic correction over the
+        ``k`` nearest foot points but the point itself (:meth:`__call__`'s fit, its wider neighbourhoods
+        aside).  How far they miss the points' own displacements tells how well the estimate knows the field at
+        a node's spacing from the nodes: little where the field is smooth at that scale, much where it changes
+        faster than the nodes resolve (a sharp thermal front, a kink) or scatters."""
         rows = np.asarray(rows, int)
         out = np.empty((len(rows), 3))
         if len(rows) == 0:
@@ -169,11 +169,14 @@ class FieldEstimator:
         if k < 5:                       # too few others for a linear fit: the nearest other's displacement
             _, idx = self._tree.query(self._points[rows], k=min(2, len(self._points)))
             return self._disp[np.reshape(idx, (len(rows), -1))[:, -1]]
-        _, idx = self._tree.query(self._points[rows], k=k)
-        valid = idx != rows[:, None]
-        valid[valid.all(axis=1), -1] = False            # a duplicate point took its place: drop the farthest
-        fit = fits_at(self._points[idx], self._disp[idx], valid, self._points[rows], self._quadratic)
-        return fit.linear + fit.trust[:, None] * fit.correction
+        for start in range(0, len(rows), chunk):
+            these = rows[start:start + chunk]
+            _, idx = self._tree.query(self._points[these], k=k)
+            valid = idx != these[:, None]
+            valid[valid.all(axis=1), -1] = False        # a duplicate point took its place: drop the farthest
+            fit = fits_at(self._points[idx], self._disp[idx], valid, self._points[these], self._quadratic)
+            out[start:start + chunk] = fit.linear + fit.trust[:, None] * fit.correction
+        return out
 
     def _spanning(self, x: np.ndarray) -> np.ndarray:
         """Estimates ``(m, 3)`` at points ``x (m, 3)`` that lie off the plane or line of their neighbourhood, the
