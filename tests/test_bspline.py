@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse
 from OCP.gp import gp_Pnt, gp_Vec
 
-from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, curve_basis, curve_derivative_basis,
+from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, _span_rows, curve_basis, curve_derivative_basis,
                               evaluate_curve, evaluate_surface, surface_basis, surface_derivative_bases,
                               surface_derivatives, surface_first_jet, surface_normals)
 from hot2cold.kernel.convert import (curve_to_record, record_to_curve, record_to_surface,
@@ -376,3 +376,35 @@ def test_hundred_thousand_points_are_fast():
     assert b.shape == (100_000, 1200) and b.nnz == 100_000 * 16
     assert pts.shape == n.shape == (100_000, 3)
     assert elapsed < 5.0, f"{elapsed:.2f} s for 1e5 points"
+
+
+@pytest.mark.parametrize("degree", range(0, 7))
+def test_basis_rows_match_scipy_derivatives(degree):
+    """The Cox-de Boor rows and their derivatives equal scipy's B-spline derivatives (an independent
+    implementation) on knot vectors with repeated inner knots, at inner knots (the span to the right) and at
+    both ends of the domain (the last non-empty span)."""
+    from scipy.interpolate import BSpline
+
+    rng = np.random.default_rng(degree)
+    for trial in range(4):
+        inner = np.sort(rng.uniform(0.0, 3.0, rng.integers(0, 7)))
+        if trial == 1 and len(inner):
+            inner = np.repeat(inner[:2], min(degree, 2) or 1)                # knots of multiplicity up to 2
+        knots = np.concatenate([np.zeros(degree + 1), inner, np.full(degree + 1, 3.0)])
+        n = len(knots) - degree - 1
+        x = np.concatenate([rng.uniform(0.0, 3.0, 40), [0.0, 3.0], inner])
+        for nu in range(degree + 2):
+            start, rows = _span_rows(x, knots, degree, nu)
+            for k, vals in enumerate(rows):
+                dense = np.zeros((len(x), n))
+                np.put_along_axis(dense, start[:, None] + np.arange(degree + 1), vals, axis=1)
+                for i in range(n):
+                    spline = BSpline(knots, np.eye(n)[i], degree, extrapolate=False)
+                    expected = spline(x, nu=k) if k <= degree else np.zeros(len(x))
+                    # scipy's derivative at a knot may take either side: compare off the knots only there
+                    where = ~np.isin(x, knots) | (k == 0) | (k > degree)
+                    at_end = x == 3.0                         # scipy gives the left limit there too (extrapolate off)
+                    where |= at_end & (k == 0)
+                    scale = max(1.0, float(np.abs(expected[where]).max(initial=0.0)))
+                    assert np.allclose(dense[where, i], np.nan_to_num(expected[where]), atol=1e-9 * scale), \
+                        (degree, nu, k, i)

@@ -1,12 +1,14 @@
 """G1 correction along tangent edges (paper section 5, eq. 56-75)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, evaluate_surface, normal_rounding
 from hot2cold.pipeline.g1 import (MEASURABLE_DEG, NOT_ISO_SIDE, REFINED, TangentEdge, correct_g1, edge_kinks,
-                                 kink_added, kink_angles, kink_misses, tangent_edges)
+                                 kink_added, kink_angles, kink_maxima, kink_misses, tangent_edges)
 from hot2cold.core.model import Edge, EdgeUse, Face, Part
 
 CUBIC5 = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])              # 5 poles, degree 3
@@ -608,3 +610,21 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     edges[use] = replace(edges[use])                                      # the same curve, a new morph
     context.fit_face(part, face, edges, (rows, targets))
     assert context._problems[k][1] is not kept
+
+
+def test_kink_maxima_are_each_edges_own_largest_kink(blade_part):
+    """``kink_maxima`` measures many tangent edges at once (each face's normals at all its edges' samples in
+    one evaluation) and finds each edge's largest kink as ``edge_kinks`` does edge by edge, with the points a
+    hot normal leaves unmeasured left out alike; so with the mask found at each measure (``measurable`` None)."""
+    edges = tangent_edges(blade_part)
+    assert len(edges) >= 2
+    rng = np.random.default_rng(3)
+    cold = [f.surface.with_poles(f.surface.poles + 1e-3 * rng.normal(size=f.surface.poles.shape))
+            for f in blade_part.faces]
+    one_by_one = np.array([np.nanmax(edge_kinks(blade_part, cold, te)) for te in edges])
+    assert np.all(one_by_one > 1e-4)                   # the noise kinks every edge: there is something to find
+    assert np.allclose(kink_maxima(blade_part, cold, edges), one_by_one, rtol=0, atol=1e-12)
+    unmasked = [replace(te, measurable=None) for te in edges]
+    assert np.allclose(kink_maxima(blade_part, cold, unmasked), one_by_one, rtol=0, atol=1e-12)
+    assert np.allclose([kink_added(blade_part, cold, te) for te in edges],
+                       one_by_one - [te.hot_angle_max for te in edges], rtol=0, atol=1e-12)
