@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import (BSplineCurve, BSplineSurface, curve_derivative_basis, evaluate_curve, evaluate_surface,
+from .bspline import (BSplineCurve, BSplineSurface, cross, curve_derivative_basis, evaluate_curve, evaluate_surface,
                       surface_first_jet, surface_jet)
 
 #: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
@@ -224,7 +224,7 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
         last = np.full(len(at), step == LOCAL_STEPS) | np.all(np.abs(new - at) <= settle, axis=1)
         if past_border:
             out = last & np.any((target < lo) | (target > hi), axis=1) & ok
-            normal = np.cross(su[out], sv[out])
+            normal = cross(su[out], sv[out])
             normal /= np.linalg.norm(normal, axis=1)[:, None]
             rows = active[out]
             best[rows] = np.minimum(best[rows], np.abs(np.sum(r[out] * normal, axis=1)))

@@ -111,6 +111,16 @@ class Part:
     face_labels: tuple[str, ...] = ()
     styles: Any = None
 
+    @cached_property
+    def vertex_edges(self) -> tuple[tuple[int, ...], ...]:
+        """The edges ending at each vertex (edge indices in index order, one tuple per vertex), found once: the
+        corners ask for them vertex by vertex."""
+        at: list[list[int]] = [[] for _ in range(len(self.vertices))]
+        for edge in self.edges:
+            for v in dict.fromkeys(edge.vertices):
+                at[v].append(edge.index)
+        return tuple(tuple(edges) for edges in at)
+
     def face_title(self, k: int) -> str:
         """What face ``k`` is called in reports: its name in the STEP file, else its label ("" if neither)."""
         named = self.face_names[k] if k < len(self.face_names) else ""

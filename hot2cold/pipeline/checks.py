@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from ..core.threads import map_threads
 from ..core.trees import kd_tree
-from ..core.bspline import (NORMAL_RTOL, evaluate_curve, evaluate_surface, knot_breaks, surface_basis,
+from ..core.bspline import (NORMAL_RTOL, cross, evaluate_curve, evaluate_surface, knot_breaks, surface_basis,
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
 from ..errors import FieldError, InputError, KernelError, MorphError
@@ -1095,7 +1095,7 @@ def _points_and_normals(hot, cold, uv: np.ndarray):
         b, du, dv, du_sum, dv_sum = bases
         flat = surface.poles.reshape(-1, 3)
         su, sv = du @ flat, dv @ flat
-        normal = np.cross(su, sv)
+        normal = cross(su, sv)
         # undefined as in bspline.surface_normals: a derivative at the rounding noise of its sum (a collapsed
         # side, the pole of a sphere), or parallel derivatives
         size = float(np.abs(flat).max())

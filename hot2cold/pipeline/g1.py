@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import sparse
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, knot_breaks, normals_and_rounding,
+from ..core.bspline import (BSplineCurve, BSplineSurface, cross, knot_breaks, normals_and_rounding,
                             surface_derivative_bases, surface_normals)
 from ..core.lstsq import solve_tsvd
 from ..core.model import EdgeUse, Face, Part, Side, side_along
@@ -132,7 +132,7 @@ def kink_angles(surface_a: BSplineSurface, uv_a: np.ndarray, surface_b: BSplineS
 
 def _line_angles(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
     """Angles in degrees ``(m,)`` between the lines of unit normals ``na``, ``nb`` (m, 3) (:func:`kink_angles`)."""
-    sin = np.linalg.norm(np.cross(na, nb), axis=1)
+    sin = np.linalg.norm(cross(na, nb), axis=1)
     cos = np.abs(np.sum(na * nb, axis=1))
     return np.degrees(np.arctan2(sin, cos))
 
@@ -628,7 +628,7 @@ def _unit(x: np.ndarray) -> np.ndarray:
 
 
 def _line_angle(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), abs(np.dot(a, b)))))
+    return float(np.degrees(np.arctan2(np.linalg.norm(cross(a, b)), abs(np.dot(a, b)))))
 
 
 #: A face whose two edges meet at a vertex at less than this angle (degrees, hot) has a smooth boundary
@@ -637,8 +637,8 @@ _MIN_CORNER_DEG = 5.0
 
 
 def _edges_at(part: Part, face: int, vertex: int) -> list:
-    return [e for e in part.edges if face in e.faces and vertex in e.vertices and not e.degenerate
-            and e.vertices[0] != e.vertices[1]]
+    return [e for e in map(part.edges.__getitem__, part.vertex_edges[vertex])
+            if face in e.faces and not e.degenerate and e.vertices[0] != e.vertices[1]]
 
 
 def _corner_normals(part: Part, faces: list[int], vertex: int, curves: list[BSplineCurve | None]) -> dict:
@@ -654,7 +654,7 @@ def _corner_normals(part: Part, faces: list[int], vertex: int, curves: list[BSpl
         if _line_angle(*hot) < _MIN_CORNER_DEG:
             continue
         t = [_end_tangent(curves[e.index], e.vertices[0] == vertex) for e in at]
-        n = _unit(np.cross(t[0], t[1]))
+        n = _unit(cross(t[0], t[1]))
         if np.isfinite(n).all():
             out[k] = n
     return out
@@ -798,7 +798,7 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
             ref = hot_n[usable[0]]
             n_t = sum(np.sign(np.dot(hot_n[k], ref)) * np.sign(np.dot(cold_n[k], hot_n[k])) * cold_n[k]
                       for k in (sorted(fixed_n) or usable))
-            bounding = [e for e in part.edges if v in e.vertices and not e.degenerate
+            bounding = [e for e in map(part.edges.__getitem__, part.vertex_edges[v]) if not e.degenerate
                         and e.vertices[0] != e.vertices[1] and set(e.faces) & set(movable)]
             # an edge of an anchored face stays (the face was fitted to it); a line cannot turn
             stays = [e for e in bounding if curves[e.index].n_poles < 3 or set(e.faces) & set(fixed_n)]

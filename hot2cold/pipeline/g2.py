@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from ..core.bspline import (BSplineSurface, evaluate_surface, surface_derivatives, surface_jet,
+from ..core.bspline import (BSplineSurface, cross, evaluate_surface, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
 from .g1 import TangentEdge, _matched_uv, _use_of, edge_points, hot_defined, mean_spans
@@ -90,7 +90,7 @@ def cross_curvature(surface: BSplineSurface, uv: np.ndarray, tangent: np.ndarray
     uv = np.asarray(uv, dtype=float).reshape(-1, 2)
     _, s_u, s_v, s_uu, s_uv, s_vv = surface_jet(surface, uv[:, 0], uv[:, 1])
     n = surface_normals(surface, uv[:, 0], uv[:, 1])
-    c = np.cross(n, tangent)
+    c = cross(n, tangent)
     with np.errstate(divide="ignore", invalid="ignore"):
         c /= np.linalg.norm(c, axis=1, keepdims=True)
         e, f, g = (np.einsum("ij,ij->i", x, y) for x, y in ((s_u, s_u), (s_u, s_v), (s_v, s_v)))
