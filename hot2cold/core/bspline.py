@@ -705,12 +705,11 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     m = len(su)
     flat_index = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv_
                   + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
-    block = np.take(homo.reshape(-1, 4), flat_index, axis=0)
-    out = []
-    for a, b in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)):
-        w = (bu[a][:, :, None] * bv[b][:, None, :]).reshape(m, 1, (p + 1) * (q + 1))
-        out.append(np.matmul(w, block)[:, 0, :])
-    return out
+    block = np.take(homo.reshape(-1, 4), flat_index, axis=0).reshape(m, p + 1, q + 1, 4)
+    # summed over v first for the three v-derivatives at once, then over u for each pair
+    along_v = np.matmul(np.stack(bv, axis=1)[:, None, :, :], block)                 # (m, p + 1, 3, 4)
+    return [np.einsum("ma,mak->mk", bu[a], along_v[:, :, b, :])
+            for a, b in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))]
 
 
 def _quotient_jet(a, a_u, a_v, a_uu, a_uv, a_vv) -> tuple[np.ndarray, ...]:
