@@ -160,7 +160,8 @@ class Span(NamedTuple):
         keep = self.sigma > LINEAR_RCOND * top[:, None]
         inverse = np.where(keep, 1.0 / np.where(keep, self.sigma, 1.0), 0.0)      # (c, 3)
         mean = valid / self.count[:, None]                                         # (c, m)
-        return np.concatenate([mean[:, None, :], np.einsum("cji,cj,cmj->cim", self.vt, inverse, self.u)], axis=1)
+        weighted = self.vt.transpose(0, 2, 1) * inverse[:, None, :]                # (c, 3, 3): V diag(1 / sigma)
+        return np.concatenate([mean[:, None, :], np.matmul(weighted, self.u.transpose(0, 2, 1))], axis=1)
 
 
 class LocalFit(NamedTuple):

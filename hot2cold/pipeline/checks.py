@@ -31,7 +31,7 @@ from ..core.bspline import (NORMAL_RTOL, cross, evaluate_curve, evaluate_surface
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
 from ..errors import FieldError, InputError, KernelError, MorphError
-from .classify import curve_length, part_distances
+from .classify import Starts, curve_length, part_distances
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
 from ..kernel.validity import SolidCheck, face_areas, self_intersections
@@ -156,7 +156,7 @@ def _sample(n: int, most: int) -> np.ndarray:
 
 
 def check_positions(part: Part, field: DisplacementField, projector: Projector, settings: Settings,
-                    inverted: bool = False) -> None:
+                    inverted: bool = False, starts: Starts | None = None) -> None:
     """Raise :class:`FieldError` when hot and cold are mixed up in ``field``: its nodes moved by their
     displacements (the cold part's positions given with cold-to-hot displacements), or moved against them
     (displaced positions: the cold part's, given with hot-to-cold displacements), lie on the hot part rather
@@ -167,7 +167,8 @@ def check_positions(part: Part, field: DisplacementField, projector: Projector, 
     a point lies on the part rather than another where it is ``_NEARER`` times nearer to it and within
     ``_ON_SHARE`` of the node distance (:func:`~hot2cold.pipeline.classify.part_distances`).  ``inverted``: the
     field is a cold-to-hot one, inverted (``--invert``), whose displacements are about the given ones negated;
-    the message speaks of the field as given.
+    the message speaks of the field as given.  ``starts``: Newton's starts on the part's faces
+    (:class:`~hot2cold.pipeline.classify.Starts`, kept for the classification), None: made here.
     """
     rows = _sample(len(field), _SAMPLE)
     m = len(rows)
@@ -179,7 +180,7 @@ def check_positions(part: Part, field: DisplacementField, projector: Projector, 
         return              # moved or not, the nodes lie where they lie: nothing to tell
     node_distance = settings.lengths(part.diagonal)[0]
     raw = part_distances(part, np.concatenate([points, points + moves, points - moves]), projector,
-                         node_distance, settings.threads).reshape(3, m)
+                         node_distance, settings.threads, starts).reshape(3, m)
     here, there = np.maximum(raw[0], rounding), np.maximum(raw[1:], rounding)
     on = _ON_SHARE * node_distance
     nearer = np.sum(there * _NEARER < np.minimum(here, on), axis=1)

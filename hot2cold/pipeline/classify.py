@@ -116,6 +116,26 @@ def start_grid(face, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     return grid_points(surface, u, v).reshape(-1, 3), np.column_stack([uu.ravel(), vv.ravel()])
 
 
+class Starts:
+    """Newton's starts on every face of a part (:func:`start_grid`, ``START_SPACING`` of its diagonal apart) and
+    a k-d tree over each face's, made for a face when first asked and kept: the check of a field's positions
+    (:func:`part_distances`) and the classification of its nodes (:func:`classify_nodes`) start from the same
+    grids.  Faces may be asked for from several threads at once (each face by one)."""
+
+    def __init__(self, part: Part):
+        self.spacing = START_SPACING * part.diagonal
+        self._part = part
+        self._faces: dict[int, tuple[np.ndarray, np.ndarray, cKDTree]] = {}
+
+    def of(self, k: int) -> tuple[np.ndarray, np.ndarray, cKDTree]:
+        """Face ``k``'s start points ``(m, 3)``, their ``uv (m, 2)`` and a k-d tree over the points."""
+        found = self._faces.get(k)
+        if found is None:
+            grid, grid_uv = start_grid(self._part.faces[k], self.spacing)
+            found = self._faces[k] = (grid, grid_uv, kd_tree(grid))
+        return found
+
+
 def _dense(uv: np.ndarray, spacing: float, face) -> np.ndarray:
     """The pcurve polyline ``uv (m, 2)`` with points added so that they lie at most about ``spacing`` apart
     on the surface."""
@@ -178,8 +198,9 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
 
 
 def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
-                   projector: Projector) -> Classification:
-    """Classify the nodes of ``field`` on ``part`` (see the module docstring).
+                   projector: Projector, starts: Starts | None = None) -> Classification:
+    """Classify the nodes of ``field`` on ``part`` (see the module docstring), Newton started from ``starts``
+    (None: made here).
 
     Each solid (and the free faces beside them, as one more group) classifies the nodes on its own: a node
     on two coincident faces of touching solids feeds both.  Row i < N of the result is field node i, in the
@@ -189,7 +210,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     node_distance, edge_distance = settings.lengths(part.diagonal)
     points = field.points
     n = len(points)
-    spacing = START_SPACING * part.diagonal
+    starts = starts if starts is not None else Starts(part)
     cloud, cloud_face, apart = _face_cloud(part, projector, n)
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * apart)
     boundary = _Boundary.of(part)
@@ -199,7 +220,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     for g in groups:
         keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
         records.append(_classify_group(part, points, pair_node[keep], pair_face[keep], node_distance,
-                                       edge_distance, spacing, projector, boundary, settings.threads))
+                                       edge_distance, starts, projector, boundary, settings.threads))
     if len(records) == 1:
         role, owner, uv, t, foot, distance = records[0]
         node = np.arange(n)
@@ -225,7 +246,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
 
 
 def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: float,
-                   threads: int = 1) -> np.ndarray:
+                   threads: int = 1, starts: Starts | None = None) -> np.ndarray:
     """The distance ``(n,)`` (mm) of each of ``points (n, 3)`` to the nearest face of ``part`` where it is within
     ``reach``, inf elsewhere: a quick look at where points lie, for the checks of a field before the morph.
 
@@ -239,9 +260,9 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
         return best
     cloud, cloud_face, apart = _face_cloud(part, projector, len(points))
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
-    spacing = START_SPACING * part.diagonal
+    starts = starts if starts is not None else Starts(part)
     faces = [(k, pair_node[group]) for k, group in runs(pair_face)]
-    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], spacing,
+    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]),
                                                 projector.face_box(job[0])), faces, threads,
                        cost=[len(nodes) for _, nodes in faces])
     for (k, nodes), fp in zip(faces, feet):
@@ -256,9 +277,10 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
 _FAR_SIDE_STARTS = 16
 
 
-def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
+def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, cKDTree], box) -> FootPoints:
     """Foot points of ``points (m, 3)`` on ``face`` by Newton's method (:func:`project_to_surface` within
-    ``box``), each started at the nearest point of the face's :func:`start_grid`, and again at the nearest
+    ``box``), each started at the nearest point of the face's :func:`start_grid` (``start``: its points, their
+    uv and a k-d tree over the points, :meth:`Starts.of`), and again at the nearest
     of its ``_FAR_SIDE_STARTS`` nearest starts whose normal points the other way, where there is one: the
     far side of a thin edge.  Where both settle, the nearer foot point is kept.
 
@@ -268,9 +290,9 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
     trimmed blade of ``tests/test_g1_trimmed.py``, nodes 0.07-0.1 mm off a trailing edge thinner than that:
     30 foot points up to 0.023 mm farther than the nearest)."""
     surface = face.surface
-    grid, grid_uv = start_grid(face, spacing)
+    grid, grid_uv, tree = start
     k = min(_FAR_SIDE_STARTS, len(grid))
-    _, near = kd_tree(grid).query(points, k=k, workers=-1)
+    _, near = tree.query(points, k=k, workers=-1)
     near = near.reshape(len(points), k)
     fp = project_to_surface(surface, points, grid_uv[near[:, 0]], box)
     used = np.zeros(len(grid), bool)                          # the normals of those starts only
@@ -296,7 +318,7 @@ def _foot_points(face, points: np.ndarray, spacing: float, box) -> FootPoints:
 
 
 def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
-                    node_distance: float, edge_distance: float, spacing: float, projector: Projector,
+                    node_distance: float, edge_distance: float, starts: Starts, projector: Projector,
                     boundary: _Boundary, threads: int = 1):
     """Classify ``points (N, 3)`` on the faces of the candidate pairs ``(pair_node, pair_face)`` (each
     ``(c,)``, sorted by face): the arrays role, owner ``(N,)``, uv ``(N, 2)``, t ``(N,)``, foot ``(N, 3)``,
@@ -329,7 +351,7 @@ def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_
     # be a second local minimum within ``node_distance``).
     unsettled = []
     faces = [(k, pair_node[group], projector.face_box(k)) for k, group in runs(pair_face)]
-    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], spacing, job[2]), faces,
+    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]), job[2]), faces,
                        threads, cost=[len(nodes) for _, nodes, _ in faces])
     for (k, nodes, _), fp in zip(faces, feet):
         offer(k, nodes[fp.settled], fp.uv[fp.settled], fp.distance[fp.settled])

@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
 from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage, check_hot, check_positions,
                      check_result, edge_grids, face_grids, with_slack)
-from .classify import classify_nodes
+from .classify import Starts, classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from ..io.field import DisplacementField, as_field
@@ -784,15 +784,16 @@ def smoothing_noise(scatter: float, settings: Settings) -> float:
 NOISY_SHARE = 0.1
 
 
-def _classified(part, field: DisplacementField, settings: Settings, projector: Projector, check: bool = True,
-                inverted: bool = False) -> tuple[Classification, DisplacementField, float]:
+def _classified(part, field: DisplacementField, settings: Settings, projector: Projector, starts: Starts,
+                check: bool = True, inverted: bool = False) -> tuple[Classification, DisplacementField, float]:
     """Classify ``field`` (METHOD step 2) and, with ``check``, check first that hot and cold are not mixed up
     in it (``inverted``: it was inverted, ``--invert``) and then that it covers the part: the classification,
     the field as classified (a row per solid a node feeds; displacements carried to the foot points of nodes
-    off the surface) and its scatter about a smooth field (mm, :func:`~hot2cold.core.localfit.scatter`)."""
+    off the surface) and its scatter about a smooth field (mm, :func:`~hot2cold.core.localfit.scatter`).  Newton
+    starts from ``starts`` (the same grids for the check and the classification)."""
     if check:
-        check_positions(part, field, projector, settings, inverted)
-    cls = classify_nodes(part, field, settings, projector)
+        check_positions(part, field, projector, settings, inverted, starts)
+    cls = classify_nodes(part, field, settings, projector, starts)
     if len(cls.node) > len(field):      # nodes that feed two solids: one row per solid they feed
         field = field.take(cls.node)
     if check:
@@ -825,13 +826,14 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     stages.begin("classify", len(field))
     projector = Projector(part.kernel.faces, part.kernel.edges)
-    cls, classified, noise = _classified(part, field, settings, projector, inverted=invert)
+    starts = Starts(part)
+    cls, classified, noise = _classified(part, field, settings, projector, starts, inverted=invert)
     element_points_added = 0
     if noise <= NOISY_SHARE * (settings.tolerance or np.inf):      # a smooth field: taken inside its elements
         dense, element_points_added = element_points(field, settings)
         if element_points_added:
             # its nodes covered the part (checked, warned once); the points inside the elements add to them
-            cls, classified, noise = _classified(part, dense, settings, projector, check=False)
+            cls, classified, noise = _classified(part, dense, settings, projector, starts, check=False)
     fe_field, field = field, classified
     scale = FieldScale.of(cls, field)
     allowance = noise_allowance(noise, int(cls.used.sum()))
