@@ -27,6 +27,7 @@ are :class:`hot2cold.core.model.Side` (u0, u1, v0, v1); indices number from 0 an
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -137,19 +138,38 @@ def _line_angles(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(sin, cos))
 
 
-def _normals_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.ndarray]]) -> list[np.ndarray]:
-    """The unit normals ``(m_i, 3)`` of ``surfaces[k_i]`` at ``uv_i (m_i, 2)`` for each ``(k_i, uv_i)`` of ``asked``:
-    one evaluation per face for all that is asked of it (a call's cost is mostly its own, not its points')."""
+def _normals_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.ndarray]],
+                     evaluate: Callable[[BSplineSurface, np.ndarray, np.ndarray], np.ndarray] = surface_normals
+                     ) -> list[np.ndarray]:
+    """``evaluate`` (default :func:`~hot2cold.core.bspline.surface_normals`, rows ``(m, ...)``) of
+    ``surfaces[k_i]`` at ``uv_i (m_i, 2)`` for each ``(k_i, uv_i)`` of ``asked``: one evaluation per face for all
+    that is asked of it (a call's cost is mostly its own, not its points')."""
     rows: dict[int, list[int]] = {}
     for i, (k, _) in enumerate(asked):
         rows.setdefault(k, []).append(i)
     out: list[np.ndarray] = [np.zeros((0, 3))] * len(asked)
     for k, these in rows.items():
         uv = np.concatenate([asked[i][1] for i in these])
-        normals = surface_normals(surfaces[k], uv[:, 0], uv[:, 1])
-        for i, n in zip(these, np.split(normals, np.cumsum([len(asked[i][1]) for i in these])[:-1])):
+        found = evaluate(surfaces[k], uv[:, 0], uv[:, 1])
+        for i, n in zip(these, np.split(found, np.cumsum([len(asked[i][1]) for i in these])[:-1])):
             out[i] = n
     return out
+
+
+def hot_measurable(part: Part, asked_a: list[tuple[int, np.ndarray]], asked_b: list[tuple[int, np.ndarray]]
+                   ) -> list[np.ndarray]:
+    """:func:`hot_defined` for many pairs of faces at once: per pair ``i`` the ``(m_i,)`` bool at the matching
+    parameters ``asked_a[i] = (face a, uv_a (m_i, 2))`` and ``asked_b[i] = (face b, uv_b (m_i, 2))``, each hot
+    face evaluated once for all that is asked of it."""
+    def normals_rounding(surface: BSplineSurface, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.column_stack(normals_and_rounding(surface, u, v))                  # (m, 4)
+
+    hot = [face.surface for face in part.faces]
+    found = _normals_by_face(hot, list(asked_a) + list(asked_b), normals_rounding)
+    bound = np.radians(MEASURABLE_DEG)
+    n = len(asked_a)
+    return [np.isfinite(_line_angles(a[:, :3], b[:, :3])) & (a[:, 3] <= bound) & (b[:, 3] <= bound)
+            for a, b in zip(found[:n], found[n:])]
 
 
 def _use_of(face: Face, edge: int) -> EdgeUse:
@@ -187,12 +207,8 @@ def hot_defined(part: Part, faces: tuple[int, int], uv_a: np.ndarray, uv_b: np.n
     against |S_u| 907); so is one collapsed all but to rounding: the vise's sliver faces read 0.61 and 0.12
     deg at a corner (|S_u| 1e-7 mm against |S_v| 25), within 6e-6 mm of it.  Measures of the morphed faces
     leave those points out."""
-    fa, fb = (part.faces[k].surface for k in faces)
     uv_a, uv_b = (np.asarray(uv, dtype=float).reshape(-1, 2) for uv in (uv_a, uv_b))
-    na, rounding_a = normals_and_rounding(fa, uv_a[:, 0], uv_a[:, 1])
-    nb, rounding_b = normals_and_rounding(fb, uv_b[:, 0], uv_b[:, 1])
-    bound = np.radians(MEASURABLE_DEG)
-    return np.isfinite(_line_angles(na, nb)) & (rounding_a <= bound) & (rounding_b <= bound)
+    return hot_measurable(part, [(faces[0], uv_a)], [(faces[1], uv_b)])[0]
 
 
 def edge_kinks(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge, uv: tuple | None = None
@@ -404,12 +420,12 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     n_points_factor = max(int(n_points_factor), 1)
     surfaces = list(face_surfaces)
 
-    before, reasons = [], []
-    tasks: list[_Task] = []
+    before = kink_maxima(part, surfaces, edges)          # as the edges come, before any face turns
+    reasons: list[str] = []
+    planned = []                                # (edge row, edge, its faces, their sides, why fixed, uv (m, 2) each)
     for r, te in enumerate(edges):
         fa, fb = (part.faces[k] for k in te.faces)
         use_a, use_b = _use_of(fa, te.edge), _use_of(fb, te.edge)
-        before.append(_max(edge_kinks(part, surfaces, te)))          # at the matched samples, uv_a and uv_b
         # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
         # the side row and the second row only, whatever part of the side the edge covers.
         sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
@@ -436,10 +452,17 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
                 axis, end = found[0].axis, found[0].end
                 uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
             uvs.append(uv)
-        na = surface_normals(surfaces[fa.index], uvs[0][:, 0], uvs[0][:, 1])
-        nb = surface_normals(surfaces[fb.index], uvs[1][:, 0], uvs[1][:, 1])
-        keep = (np.isfinite(na).all(axis=1) & np.isfinite(nb).all(axis=1)
-                & hot_defined(part, te.faces, uvs[0], uvs[1]))
+        planned.append((r, te, (fa, fb), sides, why, uvs))
+
+    # the normals of every edge's points at once, face by face: on the surfaces with their side rows shared
+    # (the surfaces the second rows are solved on), and whether the hot ones are defined there
+    asked = [(faces[side].index, uvs[side]) for side in (0, 1) for _, _, faces, _, _, uvs in planned]
+    normals = _normals_by_face(surfaces, asked)
+    measurable = hot_measurable(part, asked[:len(planned)], asked[len(planned):])
+    tasks: list[_Task] = []
+    for i, (r, te, faces, sides, why, uvs) in enumerate(planned):
+        na, nb = normals[i], normals[len(planned) + i]
+        keep = np.isfinite(na).all(axis=1) & np.isfinite(nb).all(axis=1) & measurable[i]
         sign = np.where(np.sum(na * nb, axis=1) < 0, -1.0, 1.0)
         if why[0]:
             normal_t = na                          # face a cannot move: b turns into its tangent plane
@@ -447,7 +470,7 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
             normal_t = nb
         else:
             normal_t = na + sign[:, None] * nb                                  # eq. (63)
-        for face, uv, found, fixed in zip((fa, fb), uvs, sides, why):
+        for face, uv, found, fixed in zip(faces, uvs, sides, why):
             if not fixed:
                 tasks.append(_Task(r, face.index, found[0], uv, normal_t, keep))
 
