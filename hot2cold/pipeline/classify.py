@@ -74,11 +74,12 @@ def cloud_spacing(lengths: list[tuple[float, float]], nodes: int, diagonal: floa
     return float(np.clip(wanted, CLOUD_FINEST * diagonal, START_SPACING * diagonal))
 
 
-def _face_cloud(part: Part, projector: Projector, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
+def _face_cloud(part: Part, projector: Projector, nodes: int, lengths: list[tuple[float, float]] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, float]:
     """Points ``(m, 3)`` about :func:`cloud_spacing` apart (for ``nodes`` nodes) inside every face's trimmed
     domain and on its boundary (the face's surface at its pcurves), their face ``(m,)`` and that spacing
-    (mm): they name each node's candidate faces."""
-    lengths = [_lengths(face) for face in part.faces]
+    (mm): they name each node's candidate faces.  ``lengths``: the faces' :func:`_lengths` (None: found here)."""
+    lengths = [_lengths(face) for face in part.faces] if lengths is None else lengths
     spacing = cloud_spacing(lengths, nodes, part.diagonal)
     points, owners = [], []
     for face, (length_u, length_v) in zip(part.faces, lengths):
@@ -118,14 +119,28 @@ def start_grid(face, spacing: float) -> tuple[np.ndarray, np.ndarray]:
 
 class Starts:
     """Newton's starts on every face of a part (:func:`start_grid`, ``START_SPACING`` of its diagonal apart) and
-    a k-d tree over each face's, made for a face when first asked and kept: the check of a field's positions
-    (:func:`part_distances`) and the classification of its nodes (:func:`classify_nodes`) start from the same
-    grids.  Faces may be asked for from several threads at once (each face by one)."""
+    a k-d tree over each face's, made for a face when first asked and kept, and the clouds that name each
+    node's candidate faces (:meth:`cloud`): the check of a field's positions (:func:`part_distances`) and the
+    classification of its nodes (:func:`classify_nodes`) start from the same.  Faces may be asked for from
+    several threads at once (each face by one)."""
 
     def __init__(self, part: Part):
         self.spacing = START_SPACING * part.diagonal
         self._part = part
         self._faces: dict[int, tuple[np.ndarray, np.ndarray, cKDTree]] = {}
+        self._lengths: list[tuple[float, float]] | None = None
+        self._clouds: dict[float, tuple[np.ndarray, np.ndarray, float]] = {}
+
+    def cloud(self, projector: Projector, nodes: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """:func:`_face_cloud` for ``nodes`` nodes, kept by its spacing: a check of a sample of the nodes and
+        the classification of them all share it where their numbers give the same spacing (the coarsest, for
+        most parts)."""
+        if self._lengths is None:
+            self._lengths = [_lengths(face) for face in self._part.faces]
+        spacing = cloud_spacing(self._lengths, nodes, self._part.diagonal)
+        if spacing not in self._clouds:
+            self._clouds[spacing] = _face_cloud(self._part, projector, nodes, self._lengths)
+        return self._clouds[spacing]
 
     def of(self, k: int) -> tuple[np.ndarray, np.ndarray, cKDTree]:
         """Face ``k``'s start points ``(m, 3)``, their ``uv (m, 2)`` and a k-d tree over the points."""
@@ -211,7 +226,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     points = field.points
     n = len(points)
     starts = starts if starts is not None else Starts(part)
-    cloud, cloud_face, apart = _face_cloud(part, projector, n)
+    cloud, cloud_face, apart = starts.cloud(projector, n)
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * apart)
     boundary = _Boundary.of(part)
     group_of_face = np.array([face.solid for face in part.faces], int)
@@ -258,9 +273,9 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
     best = np.full(len(points), np.inf)
     if not len(points):
         return best
-    cloud, cloud_face, apart = _face_cloud(part, projector, len(points))
-    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
     starts = starts if starts is not None else Starts(part)
+    cloud, cloud_face, apart = starts.cloud(projector, len(points))
+    pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
     faces = [(k, pair_node[group]) for k, group in runs(pair_face)]
     feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]),
                                                 projector.face_box(job[0])), faces, threads,
