@@ -452,20 +452,18 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-#: Rows combined with their poles at once by :func:`_combine` (bounds its ``(rows, width, 3)`` gather).
-_ROWS_AT_ONCE = 16_384
+#: Fewer rows than this are combined with their poles by a gather and a sum (:func:`_combine`), more by a
+#: sparse product: building a sparse matrix costs more than the sum for a few rows, less for many.
+_FEW_ROWS = 128
 
 
 def _combine(cols: np.ndarray, vals: list[np.ndarray], poles: np.ndarray) -> list[np.ndarray]:
     """``B @ poles`` for each fixed-width basis ``B`` of ``vals`` (each ``(m, w)``, the columns ``cols (m, w)``)
-    and ``poles (n, 3)``: the points or derivatives ``(m, 3)``, without building a sparse matrix (whose
-    construction costs more than the sum for the few rows most calls have)."""
-    out = [np.empty((len(cols), poles.shape[1])) for _ in vals]
-    for a in range(0, len(cols), _ROWS_AT_ONCE):
-        near = poles[cols[a:a + _ROWS_AT_ONCE]]                       # (rows, w, 3)
-        for x, o in zip(vals, out):
-            np.einsum("mw,mwk->mk", x[a:a + _ROWS_AT_ONCE], near, out=o[a:a + _ROWS_AT_ONCE])
-    return out
+    and ``poles (n, d)``: the points or derivatives ``(m, d)``."""
+    if len(cols) >= _FEW_ROWS:
+        return [_cols_to_csr(cols, x, len(poles)) @ poles for x in vals]
+    near = poles[cols]                                                        # (m, w, d)
+    return [np.einsum("mw,mwk->mk", x, near) for x in vals]
 
 
 def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
