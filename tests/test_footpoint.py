@@ -215,3 +215,27 @@ def test_candidate_faces_are_those_of_the_k_nearest_samples():
                 maybe |= {(i, int(o)) for o in owner[within & (d[i] <= kth[i])]}
         assert surely <= got <= maybe, trial
         assert np.all(np.diff(face.astype(np.int64) * len(points) + node) > 0)      # by owner, then point
+
+
+def test_starts_shared_by_the_check_and_the_classification_change_nothing():
+    """``classify.Starts`` keeps each face's start grid and the candidate clouds for every classification of
+    the part's nodes: the check of a sample of the nodes (``part_distances``) and then the classification of
+    them all, sharing one, classify every node as a classification with starts of its own does (Rotor 37, 3 000
+    surface nodes of its CalculiX field), and the shared clouds are the same objects where the spacing is."""
+    from hot2cold.pipeline.classify import Starts, part_distances
+
+    part = load_part(SAMPLES / "rotor37_blade.step", Settings())
+    data = np.load(SAMPLES / "rotor37_blade_field.npz")
+    pick = np.random.default_rng(5).choice(len(data["points"]), 3000, replace=False)
+    field = as_field((data["points"][pick], data["displacements"][pick]), "mm", None)
+    settings = Settings()
+    fresh = classify_nodes(part, field, settings, Projector(part.kernel.faces, part.kernel.edges))
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    starts = Starts(part)
+    near = part_distances(part, field.points[:500], projector, settings.lengths(part.diagonal)[0], 1, starts)
+    assert np.isfinite(near).mean() > 0.9
+    shared = classify_nodes(part, field, settings, projector, starts)
+    np.testing.assert_array_equal(shared.role, fresh.role)
+    np.testing.assert_array_equal(shared.owner, fresh.owner)
+    np.testing.assert_allclose(shared.distance[fresh.used], fresh.distance[fresh.used], rtol=0, atol=1e-12)
+    assert starts.cloud(projector, 3000) is starts.cloud(projector, 3000)
