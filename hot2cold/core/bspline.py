@@ -492,8 +492,8 @@ def surface_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.n
 
 def surface_first_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points and first partial derivatives ``(S, S_u, S_v)``, each (m, 3), at parameters ``u``, ``v`` (m,):
-    :func:`evaluate_surface` and :func:`surface_derivatives` from one evaluation of the basis rows, summed
-    over each row's ``(p + 1)(q + 1)`` poles without a sparse matrix (Gauss-Newton's inner loop)."""
+    :func:`evaluate_surface` and :func:`surface_derivatives` from one evaluation of the basis rows
+    (:func:`_combine`; Gauss-Newton's inner loop)."""
     cols, vals = _surface_rows(surface, u, v, 1)
     return tuple(_combine(cols, vals, surface.poles.reshape(-1, 3)))
 

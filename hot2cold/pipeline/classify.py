@@ -74,13 +74,11 @@ def cloud_spacing(lengths: list[tuple[float, float]], nodes: int, diagonal: floa
     return float(np.clip(wanted, CLOUD_FINEST * diagonal, START_SPACING * diagonal))
 
 
-def _face_cloud(part: Part, projector: Projector, nodes: int, lengths: list[tuple[float, float]] | None = None
+def _face_cloud(part: Part, projector: Projector, lengths: list[tuple[float, float]], spacing: float
                 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Points ``(m, 3)`` about :func:`cloud_spacing` apart (for ``nodes`` nodes) inside every face's trimmed
-    domain and on its boundary (the face's surface at its pcurves), their face ``(m,)`` and that spacing
-    (mm): they name each node's candidate faces.  ``lengths``: the faces' :func:`_lengths` (None: found here)."""
-    lengths = [_lengths(face) for face in part.faces] if lengths is None else lengths
-    spacing = cloud_spacing(lengths, nodes, part.diagonal)
+    """Points ``(m, 3)`` about ``spacing`` (mm, :func:`cloud_spacing`) apart inside every face's trimmed domain
+    and on its boundary (the face's surface at its pcurves), their face ``(m,)`` and that spacing: they name
+    each node's candidate faces.  ``lengths``: the faces' :func:`_lengths`."""
     points, owners = [], []
     for face, (length_u, length_v) in zip(part.faces, lengths):
         u0, u1, v0, v1 = face.uv_box
@@ -139,7 +137,7 @@ class Starts:
             self._lengths = [_lengths(face) for face in self._part.faces]
         spacing = cloud_spacing(self._lengths, nodes, self._part.diagonal)
         if spacing not in self._clouds:
-            self._clouds[spacing] = _face_cloud(self._part, projector, nodes, self._lengths)
+            self._clouds[spacing] = _face_cloud(self._part, projector, self._lengths, spacing)
         return self._clouds[spacing]
 
     def of(self, k: int) -> tuple[np.ndarray, np.ndarray, cKDTree]:

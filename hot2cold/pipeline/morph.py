@@ -404,10 +404,7 @@ class MorphContext:
         else:                           # still moving faces off: those keep their fits
             log.warning("G1: faces %s keep their fits: %s", sorted(off), "; ".join(off.values()))
             corrected = [surfaces[k] if k in off else c for k, c in enumerate(corrected)]
-            by_edge = {te.edge: te for te in kinked}
-            again = [r for r in reports if off.keys() & set(r.faces)]
-            now = dict(zip((r.edge for r in again), kink_maxima(part, corrected, [by_edge[r.edge] for r in again])))
-            reports = [replace(r, kink_after_max=float(now[r.edge])) if r.edge in now else r for r in reports]
+            reports = _measured_again(part, corrected, reports, kinked, set(off))
         for r, report in enumerate(reports):
             if report.edge not in plain:
                 continue
@@ -459,9 +456,7 @@ class MorphContext:
                 if not refits:
                     break
             # the G1 reports are measured again where a face bent
-            again = [r for r in reports if bent_faces & set(r.faces)]
-            now = dict(zip((r.edge for r in again), kink_maxima(part, current, [by_edge[r.edge] for r in again])))
-            reports = [replace(r, kink_after_max=float(now[r.edge])) if r.edge in now else r for r in reports]
+            reports = _measured_again(part, current, reports, self.tangent, bent_faces)
             surfaces_after = current
         else:
             surfaces_after = surfaces
@@ -603,6 +598,16 @@ class MorphContext:
             return ""
         return (f"{verb} face {k} would take it {now:.2g} mm off the field ({allowed:.2g} mm allowed, "
                 f"{was:.2g} before)")
+
+
+def _measured_again(part: Part, surfaces: list[BSplineSurface], reports: list[G1Report], edges: list[TangentEdge],
+                    faces: set[int]) -> list[G1Report]:
+    """``reports`` with the largest kink after the correction measured again on ``surfaces`` for the edges
+    (of ``edges``, the tangent edges the reports are of) on one of ``faces``."""
+    by_edge = {te.edge: te for te in edges}
+    again = [r for r in reports if faces & set(r.faces)]
+    now = dict(zip((r.edge for r in again), kink_maxima(part, surfaces, [by_edge[r.edge] for r in again])))
+    return [replace(r, kink_after_max=float(now[r.edge])) if r.edge in now else r for r in reports]
 
 
 class _Stages:
