@@ -686,26 +686,28 @@ def insert_knots(surface: BSplineSurface, axis: int, knots) -> BSplineSurface:
 # ----------------------------------------------------------------------------------------------------------
 
 def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
-    """Derivatives of the homogeneous surface ``A = sum w_ij N_i N_j (P_ij, 1)`` (non-rational: w = 1).
+    """Derivatives of the homogeneous surface ``A = sum w_ij N_i N_j (P_ij, 1)``.
 
     Returns ``[A, A_u, A_v, A_uu, A_uv, A_vv]``, each (m, 4): columns 0-2 the weighted point part, column 3
-    the weight function ``W`` and its derivatives.
+    the weight function ``W`` and its derivatives; for a non-rational surface (no weights) each (m, 3), the
+    surface's own derivatives (``W = 1``).
     """
     uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
     nu_, nv_ = surface.shape
     su, bu = _span_rows(uu, surface.u_knots, p, 2)
     sv, bv = _span_rows(vv, surface.v_knots, q, 2)
-    w = surface.weights if surface.weights is not None else np.ones((nu_, nv_))
-    homo = np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)        # (nu, nv, 4)
-    # The (p+1) x (q+1) block of homogeneous poles of each row: (m, (p+1) (q+1), 4).  (np.take on the flat
+    w = surface.weights
+    homo = surface.poles if w is None else np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)
+    width = homo.shape[2]
+    # The (p+1) x (q+1) block of homogeneous poles of each row: (m, (p+1) (q+1), width).  (np.take on the flat
     # array gathers many times faster than fancy indexing of the 3-D one.)
     m = len(su)
     flat_index = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv_
                   + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
-    block = np.take(homo.reshape(-1, 4), flat_index, axis=0).reshape(m, p + 1, q + 1, 4)
+    block = np.take(homo.reshape(-1, width), flat_index, axis=0).reshape(m, p + 1, q + 1, width)
     # summed over v first for the three v-derivatives at once, then over u for each pair
-    along_v = np.matmul(np.stack(bv, axis=1)[:, None, :, :], block)                 # (m, p + 1, 3, 4)
+    along_v = np.matmul(np.stack(bv, axis=1)[:, None, :, :], block)                 # (m, p + 1, 3, width)
     return [np.einsum("ma,mak->mk", bu[a], along_v[:, :, b, :])
             for a, b in ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))]
 
@@ -724,8 +726,10 @@ def _quotient_jet(a, a_u, a_v, a_uu, a_uv, a_vv) -> tuple[np.ndarray, ...]:
 
 
 def surface_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, ...]:
-    """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (m, 3), by the quotient rule on the homogeneous form."""
-    return _quotient_jet(*_homogeneous_derivatives(surface, u, v))
+    """``(S, S_u, S_v, S_uu, S_uv, S_vv)``, each (m, 3): by the quotient rule on the homogeneous form of a
+    rational surface, directly for a non-rational one."""
+    derivatives = _homogeneous_derivatives(surface, u, v)
+    return tuple(derivatives) if surface.weights is None else _quotient_jet(*derivatives)
 
 
 def surface_second_derivatives(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -44,8 +44,9 @@ STEP_RTOL = 1e-9
 MAX_ITERATIONS = 25
 #: Gauss-Newton steps of :func:`curve_distances` and :func:`surface_distances`.
 LOCAL_STEPS = 8
-#: Nodes evaluated together (bounds the memory of the jet: about 1 kB a node for bicubic patches).
-CHUNK = 65_536
+#: Nodes evaluated together: bounds the memory of the jet (about 1 kB a node for bicubic patches) and keeps a
+#: chunk's arrays in the cache.
+CHUNK = 16_384
 
 
 @dataclass(frozen=True, eq=False)
