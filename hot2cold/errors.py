@@ -42,3 +42,8 @@ class OutputError(Hot2ColdError, OSError):
     """An output file could not be written (nothing of it is left behind)."""
 
     exit_code = 6
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (its whitespace runs made single spaces), else its class's name."""
+    return " ".join(str(exc).split()) or type(exc).__name__

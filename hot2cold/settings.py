@@ -119,8 +119,8 @@ class Settings:
         diagonal; a field that moves a node farther is refused (FieldError) as no hot-to-cold field.  A
         hot-to-cold field is thermal and centrifugal strain, and a part's rigid shift with the parts it sits
         on: the paper's fields move parts of 50 to 300 mm by up to 3 mm (at most 6 %), the bundled sample
-        fields by at most 1.7 % (README, "How the checks work").  Cold positions given as displacements move
-        a part by about its own size (95 % on the blade).  0.1 leaves honest fields a margin over the
+        fields by at most 1.7 % (``docs/guide/bad_input.md``, "How the checks work").  Cold positions given as
+        displacements move a part by about its own size (95 % on the blade).  0.1 leaves honest fields a margin over the
         paper's largest; raise it for the rare honest field that moves a part farther (a small part carried
         far by a larger one).
     """

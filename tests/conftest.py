@@ -116,3 +116,17 @@ def browser():
         browser = p.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
         yield browser
         browser.close()
+
+
+#: Markers that keep a test out of the quick tier (pyproject.toml lists what each means).
+FULL_SUITE_ONLY = ("heavy", "slow", "gmsh", "calculix", "browser", "real_parts")
+
+
+def pytest_collection_modifyitems(config, items):
+    """A test that renders in the browser is marked ``browser``; a test with none of ``FULL_SUITE_ONLY`` is
+    marked ``quick``, so that ``pytest -m quick`` runs the quick tier."""
+    for item in items:
+        if "browser" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.browser)
+        if not any(item.get_closest_marker(name) for name in FULL_SUITE_ONLY):
+            item.add_marker(pytest.mark.quick)

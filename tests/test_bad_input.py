@@ -1,4 +1,4 @@
-"""Bad input: one test per row of the README's "Bad input" table, through the command line.
+"""Bad input: one test per row of the "Bad input" table (``docs/guide/bad_input.md``), through the command line.
 
 Each refusal is checked as a user meets it: ``hot2cold.cli.main([...])``, its exit code, one line on stderr
 that starts ``hot2cold: error:`` and says what is wrong (the regular expressions are the table's messages),
@@ -170,6 +170,7 @@ def test_solid_that_is_not_closed(box):
     assert info.value.exit_code == 2
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", ["compound", "assembly"])
 def test_several_solids_and_assemblies_are_all_morphed(tmp_path, out, capsys, kind):
     import cadquery as cq
@@ -280,6 +281,7 @@ def test_duplicate_nodes_with_the_same_displacement_are_merged(tmp_path, box, ou
     assert json.loads(report.read_text())["nodes_total"] == len(nodes)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("scale, pattern", [
     (1e-3, r"the field looks like metres: use --field-units m \(units='m'\)$"),
     (1 / 25.4, r"the field looks like inches: convert it to mm$"),
@@ -309,6 +311,7 @@ def test_field_in_metres_on_a_part_at_the_origin(tmp_path, out, capsys):
              r"\(units='m'\)$", out)
 
 
+@pytest.mark.heavy
 def test_displacements_of_the_parts_size(tmp_path, box, out, capsys):
     """Cold positions given in the displacement columns: the box's nodes move by half its diagonal."""
     nodes = box[1]
@@ -335,6 +338,7 @@ def test_nodes_far_from_the_part(tmp_path, box, out, capsys):
              r"to this part, or raise --node-distance$", out)
 
 
+@pytest.mark.heavy
 def test_some_nodes_far_from_the_part_are_ignored_and_counted(tmp_path, box, out, capsys):
     nodes = box[1]
     far = nodes[:50] + 500.0
@@ -373,6 +377,7 @@ def test_very_sparse_field_that_leaves_a_large_face_bare(tmp_path, out, capsys):
              out)
 
 
+@pytest.mark.heavy
 def test_field_that_misses_a_face_with_extrapolate(tmp_path, box, out, capsys):
     report = tmp_path / "r.json"
     assert main(_morph(box[0], _top_missing(box, tmp_path), out, "--extrapolate", "--report", str(report))) == 0
@@ -408,6 +413,7 @@ def test_displacements_that_turn_the_part_inside_out(tmp_path, box, out, capsys)
     assert not data["valid"] and not data["solids"][0]["valid"]
 
 
+@pytest.mark.heavy
 def test_displacements_that_fold_a_face(tmp_path, out, capsys):
     """The middle of a plate's top face (a 12 x 12 B-spline patch) squeezed past itself, x -> -1.5 x at the
     centre: the face folds over there, and the check says where."""
@@ -469,6 +475,7 @@ def _bent_fork(tmp_path, strength: float):
     return hot, _write_field(tmp_path / "squeeze.csv", nodes, np.column_stack([bend, 0 * bend, 0 * bend]))
 
 
+@pytest.mark.heavy
 def test_displacements_that_make_the_part_cross_itself(tmp_path, out, capsys):
     """A fork whose two tines are bent towards each other until they pass through each other."""
     hot, field = _bent_fork(tmp_path, 0.012)
@@ -483,6 +490,7 @@ def _mirrored(box):
     return nodes, np.column_stack([-2.0 * nodes[:, 0], 0 * nodes[:, :2]])
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("case", ["inside out", "crossing"])
 def test_morph_from_python_refuses_an_invalid_part(case, tmp_path, box, out):
     """From Python as from the command line: ``morph`` raises MorphError on a cold part that fails the
@@ -504,6 +512,7 @@ def test_morph_from_python_refuses_an_invalid_part(case, tmp_path, box, out):
     assert _left(out.parent) == []
 
 
+@pytest.mark.heavy
 def test_bent_fork_that_does_not_cross_is_written(tmp_path, out, capsys):
     """The same fork bent less: the gap closes by more than half, the kernel is asked, and it is fine."""
     hot, field = _bent_fork(tmp_path, 0.004)
@@ -569,6 +578,7 @@ def test_output_that_cannot_be_written(box, out, capsys, monkeypatch):
 # ---------------------------------------------------------------------------------------------------------
 # Interrupted runs
 # ---------------------------------------------------------------------------------------------------------
+@pytest.mark.heavy
 @pytest.mark.parametrize("with_report", [False, True])
 def test_interrupt_while_the_step_is_written(box, out, capsys, monkeypatch, with_report):
     """Ctrl-C while the kernel writes the cold STEP (its temporary file complete, not yet renamed): exit 130,
@@ -612,6 +622,7 @@ runpy.run_module("hot2cold", run_name="__main__")
 """
 
 
+@pytest.mark.heavy
 def test_ctrl_c_in_a_running_morph(tmp_path, box):
     """A real SIGINT during the morph of the console script (its classification held up, so the signal comes
     while the morph runs however loaded the machine): exit 130, one line, no file left."""
@@ -639,6 +650,7 @@ def _bending(nodes: np.ndarray, c: float = 0.004) -> np.ndarray:
     return np.column_stack([0 * nodes[:, 0], 0 * nodes[:, 0], c * nodes[:, 0] ** 2])
 
 
+@pytest.mark.heavy
 def test_a_field_the_faces_cannot_follow_is_reported_between_the_nodes(tmp_path, box, out, capsys):
     """The box's faces are bilinear patches between straight edges: with their knots kept (``--keep-knots``)
     they stay flat under a field that bends them, the top and bottom faces 0.1 mm (the whole displacement)
@@ -663,6 +675,7 @@ def test_a_field_the_faces_cannot_follow_is_reported_between_the_nodes(tmp_path,
     assert {r["face"] for r in data["refinements"]} >= {f["index"] for f in data["faces"] if f["nodes"]}
 
 
+@pytest.mark.heavy
 def test_face_grids_take_a_field_with_elements_from_its_elements(box):
     """For a field that brings its FE elements, the grids that measure the faces between the nodes move their
     points by the elements' own field (:class:`~hot2cold.pipeline.artificial.ElementField`), all of them
@@ -690,6 +703,7 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
         assert t.near.all() and t.slack.max() < 1e-9
 
 
+@pytest.mark.heavy
 def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(box):
     """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.checks.FaceNodes`, as the
     refinement keeps them) give the grids found anew, point for point, and so do grids made without their
@@ -739,6 +753,7 @@ def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, cap
              r"estimate puts it near \(.*\) mm, more than 0\.1 x the field's largest displacement \(0\.1 mm\)", out)
 
 
+@pytest.mark.heavy
 def test_check_cold_finds_a_bump_between_the_nodes(box):
     """A fit gone wrong where the report's nodes do not look: a 1 mm bump in the middle of the top face of a
     box morphed exactly.  The check over a grid of every face finds it (and only there)."""

@@ -32,6 +32,7 @@ def block_field(tmp_path, block_nodes):
     return _write_field(tmp_path / "field.csv", block_nodes, FIELD(block_nodes))
 
 
+@pytest.mark.heavy
 def test_morph_writes_valid_cold_step_and_report(tmp_path, block_step, block_field, capsys):
     out, report = tmp_path / "cold.step", tmp_path / "report.json"
     code = main(["morph", str(block_step), str(block_field), "-o", str(out), "--report", str(report)])
@@ -48,6 +49,7 @@ def test_morph_writes_valid_cold_step_and_report(tmp_path, block_step, block_fie
     assert checks[0].valid and checks[0].closed
 
 
+@pytest.mark.heavy
 def test_field_in_metres_is_scaled(tmp_path, block_step, block_nodes):
     field = _write_field(tmp_path / "m.csv", block_nodes / 1000.0, FIELD(block_nodes) / 1000.0)
     out = tmp_path / "cold.step"
@@ -128,6 +130,7 @@ def test_missing_output_folder(tmp_path, block_step, block_field, capsys):
              "does not exist")
 
 
+@pytest.mark.heavy
 def test_console_script_runs_without_traceback(tmp_path, block_step):
     field = tmp_path / "field.csv"
     field.write_text("x,y,z,dx,dy\n")
@@ -138,6 +141,7 @@ def test_console_script_runs_without_traceback(tmp_path, block_step):
     assert not (tmp_path / "c.step").exists()
 
 
+@pytest.mark.heavy
 def test_quiet_run_prints_nothing(tmp_path, block_step, block_field):
     """``-q``: nothing on either stream of a successful run.  Run as a process: the kernel's STEP writer prints
     its transfer statistics to the process's own standard output, past Python's ``sys.stdout``."""
@@ -148,6 +152,7 @@ def test_quiet_run_prints_nothing(tmp_path, block_step, block_field):
     assert check_solids(read_step(tmp_path / "c.step"))[0].valid
 
 
+@pytest.mark.heavy
 def test_inverted_field_gives_the_same_cold_part(tmp_path, block_step, block_nodes, capsys):
     # the cold-to-hot field of an affine hot-to-cold map x -> A x + b is y -> A^-1 (y - b), taken at hot nodes
     # FE output has volume nodes too (the inversion needs them for the displacement's normal derivative):
@@ -181,7 +186,7 @@ def test_help_lists_extrapolate_and_both_commands(capsys):
     assert "JOBS" in capsys.readouterr().out
 
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guide"
 
 
 def _morph_parser():
@@ -190,16 +195,16 @@ def _morph_parser():
     return sub.choices["morph"]
 
 
-def test_readme_names_the_morph_options_of_the_table():
-    """The README's `hot2cold morph` usage block and its list of batch options name exactly the options of
-    the table the parser and the jobs files are made from (:class:`MorphOptions`)."""
-    text = README.read_text(encoding="utf-8")
-    usage = re.search(r"```\n(hot2cold morph .*?)```", text, re.S).group(1)
+def test_the_guide_names_the_morph_options_of_the_table():
+    """The command-line guide's `hot2cold morph` usage block and the batch guide's list of options name exactly
+    the options of the table the parser and the jobs files are made from (:class:`MorphOptions`)."""
+    usage = re.search(r"```\n(hot2cold morph .*?)```", (GUIDE / "cli.md").read_text(encoding="utf-8"), re.S).group(1)
     flags = set(re.findall(r"(?<![\w-])--?[a-z][a-z-]*", usage))
     table = {opt.flag for opt in MorphOptions.table().values()}
-    assert table <= flags, f"README usage block lacks {sorted(table - flags)}"
-    assert flags <= set(_morph_parser()._option_string_actions), "README usage block names an unknown option"
-    listed = re.search(r"the options of `hot2cold morph` with the\s+same meaning: (.*?) \(`-` or `_`", text, re.S)
+    assert table <= flags, f"the guide's usage block lacks {sorted(table - flags)}"
+    assert flags <= set(_morph_parser()._option_string_actions), "the guide's usage block names an unknown option"
+    listed = re.search(r"the options of `hot2cold morph` with the\s+same meaning: (.*?) \(`-` or `_`",
+                       (GUIDE / "batch.md").read_text(encoding="utf-8"), re.S)
     assert re.findall(r"`(\w+)`", listed.group(1)) == list(MorphOptions.names())
 
 

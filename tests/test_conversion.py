@@ -189,6 +189,7 @@ def test_conversion_leaves_the_part_as_read_unchanged():
     assert not BRep_Tool.Surface_s(part.kernel.hot_faces[0]).IsUPeriodic()
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name", list(PARTS))
 def test_every_surface_morphs_an_affine_field_exactly(name):
     from hot2cold.pipeline.morph import morph
@@ -259,7 +260,7 @@ def test_an_invalid_cold_solid_is_named_by_its_face():
     import dataclasses
 
     from hot2cold.errors import MorphError
-    from hot2cold.pipeline.checks import check_result
+    from hot2cold.pipeline.result import check_result
     from hot2cold.pipeline.morph import morph
 
     box = cq.Workplane().box(10, 10, 10).val()
@@ -303,6 +304,7 @@ def _pcurve_moves(hot, converted) -> list[float]:
     return moves
 
 
+@pytest.mark.heavy
 def test_faces_whose_parameters_the_conversion_keeps_keep_their_pcurves():
     """Handle_SO101 (Autodesk): ``BRepBuilderAPI_NurbsConvert`` projects the edge curves of its B-spline faces
     anew, and moves their pcurves by up to 0.025 mm where the edge's tolerance is 6.2e-5 mm (on a tinymovr part

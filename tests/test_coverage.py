@@ -55,6 +55,7 @@ def _assert_affine(result, tol=1e-8):
     assert max(worst) <= tol, {k: w for k, w in enumerate(worst) if w > tol}
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("make", [_chamfered_box, _counterbored_plate], ids=["chamfer_0.3", "counterbore_ring"])
 def test_narrow_faces_with_nodes_on_their_edges_only_morph_exactly(make, tmp_path, capsys):
     """The nodes 1.5 mm apart: the narrow face's area times the node density is 11 to 13 nodes, none inside."""
@@ -68,6 +69,7 @@ def test_narrow_faces_with_nodes_on_their_edges_only_morph_exactly(make, tmp_pat
     _assert_affine(result)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("which", ["block", "blade"])
 def test_tessellation_only_nodes_morph(which, block_shape, blade_shape, tmp_path):
     shape = {"block": block_shape, "blade": blade_shape}[which]
@@ -87,6 +89,7 @@ def test_a_truly_bare_face_is_still_refused_and_named(tmp_path, capsys):
                     r"node within .* mm where .*: face \d+ near \(0, 0, -5\) mm", err), err
 
 
+@pytest.mark.heavy
 def test_touching_solids_share_the_nodes_of_their_coincident_faces(tmp_path, capsys):
     """Two boxes side by side (a compound, as an assembly's STEP holds them): the nodes of the face they
     share lie on a face of each; both solids get them, morph and are valid."""

@@ -65,6 +65,7 @@ def test_parameters_are_picked_up():
     assert parameters["show_nodes"].default_value is True
 
 
+@pytest.mark.heavy
 def test_hot_cold_and_nodes_are_shown(true_scale, field):
     assert set(true_scale) == {"hot", "cold", "nodes"}
     for name, colour in (("hot", "red"), ("cold", "blue")):
@@ -91,6 +92,7 @@ def test_cold_is_the_hot_moved_by_the_field(true_scale, field):
     assert max(cold.distance(v) for v in nodes) < 0.01
 
 
+@pytest.mark.heavy
 def test_exaggerate_scales_the_shown_displacement(true_scale, exaggerated):
     assert set(exaggerated) == {"hot", "cold"}                # show_nodes=False
     h = corners(true_scale["hot"].shape)

@@ -14,7 +14,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from hot2cold.io import export
+from hot2cold.views import export
 from hot2cold.errors import OutputError
 from hot2cold.core.model import Role
 from hot2cold.cli.commands import _Progress, main
@@ -30,6 +30,7 @@ def blade_surface(blade):
 
 # --- the library -----------------------------------------------------------------------------------------
 
+@pytest.mark.heavy
 def test_vtu_nodes_read_back_with_the_result_arrays(blade, blade_surface, tmp_path):
     nodes_path, surface_path = export.write_vtu(blade, tmp_path / "nodes.vtu", blade_surface)
     assert nodes_path == tmp_path / "nodes.vtu" and surface_path == tmp_path / "nodes_surface.vtu"
@@ -145,6 +146,7 @@ def _args(block_step, block_field, folder, *more):
     return ["morph", str(block_step), str(block_field), "-o", str(folder / "cold.step"), *map(str, more)]
 
 
+@pytest.mark.heavy
 def test_cli_writes_every_export_with_progress_and_table(tmp_path, block_step, block_field, capsys):
     out = {name: tmp_path / name for name in ("nodes.vtu", "cold.stl", "cold.glb", "report.json")}
     code = main(_args(block_step, block_field, tmp_path, "--vtu", out["nodes.vtu"], "--stl", out["cold.stl"],
@@ -179,6 +181,7 @@ def test_cli_writes_every_export_with_progress_and_table(tmp_path, block_step, b
     assert abs(stl.volume / volume - 1) < 0.01 and abs(glb.volume * 1e9 / volume - 1) < 0.01
 
 
+@pytest.mark.heavy
 def test_cli_quiet_prints_nothing(tmp_path, block_step, block_field, capsys):
     assert main(_args(block_step, block_field, tmp_path, "--stl", tmp_path / "c.stl", "-q")) == 0
     captured = capsys.readouterr()
@@ -186,6 +189,7 @@ def test_cli_quiet_prints_nothing(tmp_path, block_step, block_field, capsys):
     assert (tmp_path / "cold.step").exists() and (tmp_path / "c.stl").exists()
 
 
+@pytest.mark.heavy
 def test_cli_verbose_logs_each_step(tmp_path, block_step, block_field, capsys):
     assert main(_args(block_step, block_field, tmp_path, "--vtu", tmp_path / "n.vtu", "-v")) == 0
     err = capsys.readouterr().err
@@ -193,10 +197,11 @@ def test_cli_verbose_logs_each_step(tmp_path, block_step, block_field, capsys):
         assert f"INFO hot2cold.pipeline.morph: {stage} done in" in err
     assert "INFO hot2cold.kernel.step: wrote" in err
     assert "INFO hot2cold.kernel.tessellate: tessellated 18 faces" in err
-    assert f"INFO hot2cold.io.export: wrote {tmp_path / 'n.vtu'} (4161 nodes) and" in err
+    assert f"INFO hot2cold.views.export: wrote {tmp_path / 'n.vtu'} (4161 nodes) and" in err
     assert "faces: 18/18" in err                                           # and the progress
 
 
+@pytest.mark.heavy
 def test_cli_write_failure_is_one_line_with_exit_code_6(tmp_path, block_step, block_field, capsys, monkeypatch):
     def full_disk(self, file_obj=None, file_type=None, **kwargs):
         Path(file_obj).write_bytes(b"solid")
@@ -285,6 +290,7 @@ def test_cli_html_without_its_module_is_refused_before_the_run(tmp_path, block_s
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.heavy
 def test_cli_html(tmp_path, block_step, block_field, capsys):
     html = tmp_path / "report.html"
     assert main(_args(block_step, block_field, tmp_path, "--html", html, "--scale", "50", "-q")) == 0

@@ -7,7 +7,6 @@ the PATH.
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 import cadquery as cq
@@ -20,14 +19,16 @@ from hot2cold.errors import StepReadError
 from hot2cold.fe import SolverError, TetMesh, mesh_step
 from hot2cold.fe.calculix import (TI6AL4V, LoadCase, Material, MeshOptions, SolverOptions, blade_temperature,
                                   hot_to_cold_field, hub_faces, read_hot_to_cold, run_ccx, write_deck)
-from hot2cold.fe.frd import read_frd
+from hot2cold.io.frd import read_frd
 from hot2cold.io.field import read_field
 from hot2cold.kernel.project import Projector
 from hot2cold.kernel.sampling import face_list
 from hot2cold.kernel.step import read_step
 
-needs_ccx = pytest.mark.skipif(shutil.which("ccx") is None,
-                               reason="CalculiX 'ccx' not on the PATH (Debian/Ubuntu: apt-get install calculix-ccx)")
+#: Every test here meshes with gmsh; those that solve need CalculiX's ``ccx`` on the PATH (Debian/Ubuntu:
+#: ``apt-get install calculix-ccx``): without it they fail; ``-m "not calculix"`` leaves them out.
+pytestmark = pytest.mark.gmsh
+needs_ccx = pytest.mark.calculix
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
 ALPHA, E, RHO = TI6AL4V.expansion, TI6AL4V.young, TI6AL4V.density
@@ -133,6 +134,7 @@ def test_mesh_errors(parts, tmp_path):
         mesh_step(parts["bar"], 1.0, order=3)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name, size", [("filleted_block.step", 10.0), ("rotor37_blade.step", 8.0),
                                         ("twisted_blade.step", 8.0)])
 def test_gmsh_surface_k_plus_1_is_hot2cold_face_k(name, size, caplog):

@@ -1,5 +1,5 @@
 """The field readers keep the FE model's elements: ``DisplacementField.triangles`` from ``.npz``, mesh files
-(meshio) and CalculiX ``.frd`` files (its element block, :attr:`hot2cold.fe.frd.FrdFile.elements`).
+(meshio) and CalculiX ``.frd`` files (its element block, :attr:`hot2cold.io.frd.FrdFile.elements`).
 
 The ``.frd`` files are written by CalculiX itself (``ccx``, a few seconds on a coarse mesh of a box), and
 rewritten here into the short format or damaged; small synthetic ones cover the element types ccx does not
@@ -18,8 +18,9 @@ import pytest
 from hot2cold.core.elements import GMSH_TO_TET10, boundary_triangles
 from hot2cold.errors import FieldError
 from hot2cold.fe import mesh_step, read_hot_to_cold, run_ccx, write_deck
-from hot2cold.fe.frd import FrdFile
-from hot2cold.io.field import DisplacementField, element_triangles, read_field
+from hot2cold.io.frd import FrdFile
+from hot2cold.io.cells import element_triangles
+from hot2cold.io.field import DisplacementField, read_field
 
 BOX = (20.0, 8.0, 6.0)
 BOX_AREA = 2 * (BOX[0] * BOX[1] + BOX[1] * BOX[2] + BOX[0] * BOX[2])
@@ -77,6 +78,8 @@ def mesh_tets(mesh) -> np.ndarray:
     return mesh.tets[:, GMSH_TO_TET10] if mesh.tets.shape[1] == 10 else mesh.tets
 
 
+@pytest.mark.gmsh
+@pytest.mark.calculix
 @pytest.mark.parametrize("order", [2, 1])
 def test_frd_elements_are_the_decks(runs, order):
     mesh, frd = runs[order]
@@ -86,6 +89,8 @@ def test_frd_elements_are_the_decks(runs, order):
     np.testing.assert_array_equal(elements[etype], mesh.node_tags[mesh_tets(mesh)])
 
 
+@pytest.mark.gmsh
+@pytest.mark.calculix
 @pytest.mark.parametrize("order", [2, 1])
 def test_frd_triangles_are_the_mesh_boundary(runs, order):
     mesh, frd = runs[order]
@@ -130,6 +135,8 @@ def short_format(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
+@pytest.mark.gmsh
+@pytest.mark.calculix
 def test_frd_short_format(runs, tmp_path):
     mesh, frd = runs[2]
     text = short_format(frd.read_text())
@@ -183,6 +190,8 @@ def _damage(text: str, how: str) -> tuple[str, str]:
     return "\n".join(lines) + "\n", match
 
 
+@pytest.mark.gmsh
+@pytest.mark.calculix
 @pytest.mark.parametrize("how", ["node record missing", "node record cut at a field", "node record cut inside a field",
                                  "element record cut", "element missing", "not a number", "file ends",
                                  "node record first"])
@@ -235,7 +244,7 @@ def test_frd_tetrahedra_on_node_numbers_and_other_types_skipped(tmp_path, caplog
     hexa = (1, [7, 3, 12, 40, 41, 7, 3, 12])     # an 8-node brick (its nodes do not matter)
     beam = (11, [7, 3])
     text = frd_text([hexa, (3, IDS[TETS[0]].tolist()), beam, (3, IDS[TETS[1]].tolist())])
-    with caplog.at_level(logging.INFO, logger="hot2cold.fe.frd"):
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.frd"):
         field = read_field(write(tmp_path, text))
     assert "element type(s) 1 (he8, 1 element), 11 (be2, 1 element) not used" in caplog.text
     np.testing.assert_array_equal(field.node_ids, IDS)
@@ -259,7 +268,7 @@ def test_frd_shell_triangles_taken_as_they_are(tmp_path):
 
 def test_frd_triangles_of_nodes_without_results_are_dropped(tmp_path, caplog):
     text = frd_text([(3, IDS[TETS[0]].tolist()), (3, IDS[TETS[1]].tolist())], result_ids=IDS[[4, 0, 1, 2]])
-    with caplog.at_level(logging.INFO, logger="hot2cold.fe.frd"):
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.frd"):
         field = read_field(write(tmp_path, text))
     assert "4 of 6 boundary triangles name nodes without results; dropped" in caplog.text
     np.testing.assert_array_equal(field.node_ids, IDS[[4, 0, 1, 2]])
@@ -374,7 +383,7 @@ def test_meshio_duplicate_points_renumbered(tmp_path):
 
 def test_element_triangles_mixtures_and_bad_input(caplog):
     pts10, tets10 = quadratic(PTS, TETS)
-    with caplog.at_level(logging.INFO, logger="hot2cold.io.field"):
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.cells"):
         tri = element_triangles({"tetra": TETS[:1], "tetra10": tets10[1:]}, "m")
     assert "tetra and tetra10 elements mixed" in caplog.text
     assert tri.shape == (6, 3) and faces(tri) == TET_BOUNDARY

@@ -43,6 +43,7 @@ def _near_surface_nodes(face, n: int, offset: float, rng) -> tuple[np.ndarray, n
     return points, uv
 
 
+@pytest.mark.heavy
 def test_newton_matches_kernel(part):
     """Nodes within 0.05 mm of each face, started from the nearest point of the face's start grid (as the
     classification starts them): where Newton settles (most nodes), it finds the kernel's foot point."""
@@ -111,6 +112,7 @@ def test_raster_of_a_square_with_a_hole():
     assert np.all(raster.classify(np.array([[np.nan, 0.5], [2.0, 0.5]])) == Trim.OUTSIDE)
 
 
+@pytest.mark.heavy
 def test_classify_matches_fclass2d(part):
     """``Projector.classify`` (raster + kernel at the boundary) equals ``BRepTopAdaptor_FClass2d`` point by
     point, on random points of each face's box and points close to its edges."""
@@ -128,6 +130,7 @@ def test_classify_matches_fclass2d(part):
         np.testing.assert_array_equal(projector.classify(face.index, uv), projector.classify_exactly(face.index, uv))
 
 
+@pytest.mark.heavy
 def test_classification_matches_direct_projection():
     """Rotor 37 with 2500 nodes (surface nodes of its CalculiX field): the classification equals the direct
     approach, every node projected by the kernel onto every face and the nearest inside foot point kept."""
@@ -217,6 +220,7 @@ def test_candidate_faces_are_those_of_the_k_nearest_samples():
         assert np.all(np.diff(face.astype(np.int64) * len(points) + node) > 0)      # by owner, then point
 
 
+@pytest.mark.heavy
 def test_starts_shared_by_the_check_and_the_classification_change_nothing():
     """``classify.Starts`` keeps each face's start grid and the candidate clouds for every classification of
     the part's nodes: the check of a sample of the nodes (``part_distances``) and then the classification of

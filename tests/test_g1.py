@@ -320,6 +320,7 @@ def _morph_with_and_without_g1(shape, field):
     return morph(shape, field, Settings(g1_angle=None)), morph(shape, field)
 
 
+@pytest.mark.heavy
 def test_blade_bundled_field_every_tangent_edge_within_0_01_deg(blade_step):
     """The bundled blade and field (the CLI sample): every tangent edge within 0.01 deg after G1, never
     worse than before (the fit alone left 0.0129 deg at the corners before the artificial nodes improved;
@@ -337,6 +338,7 @@ def test_blade_bundled_field_every_tangent_edge_within_0_01_deg(blade_step):
     assert all(s.valid and s.closed for s in result.report.solids)
 
 
+@pytest.mark.heavy
 def test_filleted_block_every_tangent_edge_within_0_01_deg(block_shape, block_nodes):
     """Planes, cylinders and tori of the block under an untwist-and-stretch field (|d| up to 0.1 mm): every
     originally tangent edge, whether a whole side of both faces, of one, or none, ends within 0.01 deg."""
@@ -352,6 +354,7 @@ def test_filleted_block_every_tangent_edge_within_0_01_deg(block_shape, block_no
     assert all(s.valid and s.closed for s in result.report.solids)
 
 
+@pytest.mark.heavy
 def test_filleted_block_under_a_stronger_field_is_refined_along_the_edges_its_nets_cannot_close(
         block_shape, block_nodes, monkeypatch):
     """Under a stronger untwist the second rows and turns leave two of the block's edges above 0.01 deg
@@ -567,6 +570,7 @@ def test_kink_misses_are_the_edge_points_kinked_beyond_the_limit_on_both_faces()
     assert kink_misses(part, [sa, kinked], edges, 1.01 * _kink([sa, kinked], part)) == {}
 
 
+@pytest.mark.heavy
 def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_nodes):
     """G1 and G2 fit a face on a tangent edge again with other turning or bending rows only: its rows are
     reduced once (a face with 470 000 nodes took 0.3 s of QR and 0.1 s of rows for each turn) and each new set

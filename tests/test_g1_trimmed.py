@@ -14,7 +14,6 @@ fits' error), Δmax 8.3e-4 mm as without the turn; the seam 0.0053 -> 4e-5 deg b
 from __future__ import annotations
 
 import math
-import shutil
 import sys
 from pathlib import Path
 
@@ -121,7 +120,9 @@ def solved(blade):
     return morph(*blade)
 
 
-@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+@pytest.mark.heavy
+@pytest.mark.calculix
+@pytest.mark.gmsh
 def test_sides_meeting_along_trimming_curves_are_tangent_after_the_morph(solved):
     result = solved
     part = result.part
@@ -141,7 +142,8 @@ def test_sides_meeting_along_trimming_curves_are_tangent_after_the_morph(solved)
     assert result.report.valid and result.report.tolerance_met and result.report.delta_max <= 1e-3
 
 
-@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+@pytest.mark.calculix
+@pytest.mark.gmsh
 def test_curvature_jumps_are_reported_and_left_alone_by_default(solved):
     """G1 (the default) measures the curvature jumps: the trimming curves lie inside one hot surface, so
     their hot jump is 0; the seam of the loft is only C1 when hot (about 11 %), no G2 edge."""
@@ -156,7 +158,9 @@ def test_curvature_jumps_are_reported_and_left_alone_by_default(solved):
     assert "curvature jump" in solved.report.table()
 
 
-@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+@pytest.mark.heavy
+@pytest.mark.calculix
+@pytest.mark.gmsh
 def test_continuity_g2_gives_the_sides_one_curvature_along_the_trimming_curves(blade, solved):
     from hot2cold.views.page import _g1
 

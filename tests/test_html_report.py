@@ -87,6 +87,7 @@ def _png_size(png: bytes) -> tuple[int, int]:
     return struct.unpack(">II", png[16:24])
 
 
+@pytest.mark.heavy
 def test_page_has_a_row_per_face_and_edge_matching_the_report(blade, page):
     _, text, _, _ = page
     tables = _parse(text).tables
@@ -167,6 +168,7 @@ def test_rendering_leaves_matplotlib_global_state_alone(page):
     assert after[2] == before[2]                 # pyplot not imported by the report
 
 
+@pytest.mark.heavy
 def test_written_atomically_over_an_old_file(blade, mesh, tmp_path, monkeypatch):
     """The page goes to a temporary file in the same folder, then os.replace; nothing is left behind, and
     when drawing fails the old file stays as it was."""

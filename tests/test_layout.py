@@ -86,6 +86,7 @@ def test_help_runs_without_the_kernel():
     assert "morph" in out and "batch" in out
 
 
+@pytest.mark.heavy
 def test_the_morph_path_loads_neither_cadquery_nor_vtk():
     out = _run("""
         import sys
@@ -95,6 +96,7 @@ def test_the_morph_path_loads_neither_cadquery_nor_vtk():
     assert out.strip() == "[]"
 
 
+@pytest.mark.heavy
 def test_a_command_line_morph_loads_neither_cadquery_nor_vtk(tmp_path):
     args = ["morph", str(ROOT / "sample_parts" / "filleted_block.step"),
             str(ROOT / "sample_parts" / "filleted_block_field.csv"), "-o", str(tmp_path / "cold.step"), "-q"]
@@ -108,18 +110,17 @@ def test_a_command_line_morph_loads_neither_cadquery_nor_vtk(tmp_path):
     assert out.strip().splitlines()[-1] == "0 []" and (tmp_path / "cold.step").exists()
 
 
-def test_old_import_paths_keep_working():
+def test_the_package_names_are_the_library_s_and_the_old_paths_are_gone():
+    """``hot2cold.morph`` is the function, whatever was imported before; the shims of the unreleased 0.1.0's
+    flat layout (``hot2cold/morph.py``, ``hot2cold/field.py``) are gone, so no module shadows a name."""
     out = _run("""
+        import importlib.util
         import hot2cold
-        from hot2cold import Settings, morph as morph_function
-        from hot2cold.field import read_field
-        from hot2cold.io.field import read_field as read_field_now
-        from hot2cold.pipeline.morph import MorphResult, morph
-        assert morph_function is morph and read_field is read_field_now
-        from hot2cold.morph import MorphResult as old_result, morph as old_morph
-        assert old_result is MorphResult and old_morph is morph
-        # importing the old module made it the attribute hot2cold.morph: it still calls the function
-        assert callable(hot2cold.morph) and hot2cold.Settings is Settings
+        import hot2cold.pipeline.morph, hot2cold.io.field
+        from hot2cold.pipeline.morph import morph
+        from hot2cold.io.field import read_field
+        assert hot2cold.morph is morph and hot2cold.read_field is read_field
+        assert importlib.util.find_spec("hot2cold.field") is None and importlib.util.find_spec("hot2cold.morph") is None
         print("ok")
     """)
     assert out.strip() == "ok"
@@ -132,6 +133,7 @@ def test_lazy_names_are_listed(name):
     assert name in hot2cold.__all__ and name in dir(hot2cold)
 
 
+@pytest.mark.heavy
 def test_readme_python_example_runs_as_written(tmp_path):
     """The README's "From Python" example, run in a fresh interpreter (bundled paths made absolute): it
     morphs, prints the table and writes the cold STEP."""
@@ -143,3 +145,13 @@ def test_readme_python_example_runs_as_written(tmp_path):
     out = _run(code)
     assert "Δmax" in out
     assert (tmp_path / "cold.step").stat().st_size > 10_000
+
+
+def test_readme_is_for_users_and_its_test_command_is_the_ci_one():
+    """The README stays a page a user reads through (about 200 lines; the rest lives in ``docs/``), and its
+    test command is the one ``.ci/run`` runs, word for word."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 200
+    command = [line for line in readme.splitlines() if line.startswith("apt-get update")]
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()[-1]
+    assert command == [ci]

@@ -297,6 +297,7 @@ def test_blocks_match_dense_svd_on_a_curve_with_an_empty_stretch(block_rows, fmt
     _assert_matches_reference(sol, a, b)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("block_rows", [None, 3, 30, 97, 5000])
 @pytest.mark.parametrize("fmt", ["dense", "csr", "coo"])
 @pytest.mark.parametrize("k", [None, 3])
@@ -423,6 +424,7 @@ def test_full_rank_tall_problems_skip_the_svd(fmt, k):
     _assert_matches_without_svd(solve_tsvd(_as_format(a, fmt), b, full_svd_up_to=0), a, b)
 
 
+@pytest.mark.heavy
 def test_a_spline_fit_above_the_threshold_skips_the_svd_by_default():
     # bicubic 30 x 20 poles (600 unknowns > FULL_SVD_UP_TO), 20 000 data points spread over the whole domain
     surface = _surface(30, 20)

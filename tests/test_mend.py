@@ -151,6 +151,7 @@ def test_a_face_that_stays_broken_is_named(monkeypatch):
         topology.decompose(read_step(path))
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name, broken", [("nist_ctc_01_asme1_ap242-e1.stp", [56]),
                                           ("nist_ftc_06_asme1_ap242-e2.stp", [18, 115])])
 def test_the_nist_parts_the_conversion_broke_convert_to_valid_solids(name, broken):

@@ -24,6 +24,7 @@ def _cold_poles(result) -> list[np.ndarray]:
     return [surface_to_record(*bspline_surface(face)).poles for face in result.cold_kernel.faces]
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("part", ["block", "blade"])
 def test_zero_field_keeps_every_control_point(part, request):
     shape = request.getfixturevalue(f"{part}_shape")
@@ -37,6 +38,7 @@ def test_zero_field_keeps_every_control_point(part, request):
     assert result.report.valid and result.report.free_edges == 0
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("part", ["block", "blade"])
 def test_affine_field_is_reproduced_exactly(part, request):
     shape = request.getfixturevalue(f"{part}_shape")
@@ -55,6 +57,7 @@ def test_affine_field_is_reproduced_exactly(part, request):
     assert cold_volume / hot_volume == pytest.approx(np.linalg.det(THERMAL.matrix), rel=1e-6)
 
 
+@pytest.mark.heavy
 def test_smooth_nonaffine_field_on_twisted_blade(blade_shape, blade_nodes):
     result = morph(blade_shape, (blade_nodes, UNTWIST(blade_nodes)))
     assert np.linalg.norm(UNTWIST(blade_nodes), axis=1).max() > 1.0        # a real deformation, mm
@@ -68,6 +71,7 @@ def test_smooth_nonaffine_field_on_twisted_blade(blade_shape, blade_nodes):
         assert face.nodes > 0 and face.delta_max <= 1e-3
 
 
+@pytest.mark.heavy
 def test_offset_and_volume_nodes_change_nothing_beyond_that(blade_shape, blade_nodes, blade_volume_nodes):
     clean = morph(blade_shape, (blade_nodes, UNTWIST(blade_nodes)))
     rng = np.random.default_rng(7)
@@ -87,6 +91,7 @@ def test_offset_and_volume_nodes_change_nothing_beyond_that(blade_shape, blade_n
         assert change.max() <= 2e-4
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("part", ["block", "blade"])
 def test_cold_step_reads_back_valid_and_closed(part, request, tmp_path):
     from hot2cold.kernel.validity import check_solids
@@ -132,6 +137,7 @@ def _parts():
     }
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name", list(_parts()))
 def test_analytic_faces_and_several_solids_morph_exactly(name):
     from hot2cold.kernel.sampling import fe_surface_nodes
@@ -143,6 +149,7 @@ def test_analytic_faces_and_several_solids_morph_exactly(name):
     assert max(d.max() for d in face_deviation(result, THERMAL.exact_map, spacing=1.0)) <= 1e-8
 
 
+@pytest.mark.heavy
 def test_trimmed_faces_do_not_wander_over_their_untrimmed_domain():
     """Rotor 37's faces are trimmed by hub and shroud: artificial nodes over the trimmed-away part keep the
     whole untrimmed surface on the affine field's continuation, and every fit keeps full rank."""
@@ -161,6 +168,7 @@ def test_trimmed_faces_do_not_wander_over_their_untrimmed_domain():
     assert sum(f.artificial_nodes for f in result.report.faces) > 0
 
 
+@pytest.mark.heavy
 def test_g1_edges_are_reported_and_not_worsened(blade_shape, blade_nodes):
     result = morph(blade_shape, (blade_nodes, UNTWIST(blade_nodes)))
     g1 = result.report.g1
@@ -169,6 +177,7 @@ def test_g1_edges_are_reported_and_not_worsened(blade_shape, blade_nodes):
     assert max(g["kink_after_max"] for g in g1) < 0.05    # degrees
 
 
+@pytest.mark.heavy
 def test_hot_part_kept_and_blas_left_alone_unless_asked(block_shape, block_nodes):
     """The hot part's kernel shape is left as loaded (the cold geometry goes into a copy the result holds),
     and BLAS keeps its threads during a morph unless ``Settings.blas_threads`` is set."""

@@ -82,6 +82,7 @@ def _face_and_edge_nodes(result, k: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------ error maps
+@pytest.mark.heavy
 def test_one_error_scale_for_every_map_of_a_result(blade, mesh, caps):
     """0 to max(largest error, tolerance) on every panel and colour bar, whichever faces a picture shows."""
     report = blade.report
@@ -194,6 +195,7 @@ def _images(fig) -> list[AxesImage]:
     return [im for ax in fig.axes for im in ax.images]
 
 
+@pytest.mark.heavy
 def test_a_plane_is_drawn_flat_with_a_symmetric_scale(blade, mesh, caps):
     """The cap's hot curvature is 0 and its cold one rounding noise (about 1e-21 1/mm): below the floor,
     so every panel is uniform and says so; the scales are symmetric about 0."""
@@ -248,6 +250,7 @@ def test_default_views_are_along_named_axes_largest_outline_first():
     assert visual._axis_text([0.0, 0.6, 0.8]) == "(+0.00, +0.60, +0.80)"
 
 
+@pytest.mark.heavy
 def test_overlay_titles_name_the_axes(blade, mesh):
     fig = visual.overlay_figure(blade, mesh=mesh, width_in=8.0, dpi=30)
     panels = [ax for ax in fig.axes if ax.images]

@@ -1,4 +1,4 @@
-"""Tests of the FE result readers: CalculiX ``.frd`` (hot2cold.fe.frd) and meshio formats, via read_field.
+"""Tests of the FE result readers: CalculiX ``.frd`` (hot2cold.io.frd) and meshio formats, via read_field.
 
 The ``.frd`` files here are written record by record in the exact fixed-column layout CalculiX 2.20 writes
 (``tests/test_fe.py`` reads files written by ccx itself); the mesh files are written by meshio.
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from hot2cold.errors import FieldError
-from hot2cold.fe.frd import FrdFile, read_frd
+from hot2cold.io.frd import FrdFile, read_frd
 from hot2cold.io.field import DisplacementField, as_field, read_field
 
 IDS = np.array([1, 2, 3, 10, 11, 12345])

@@ -8,7 +8,6 @@ field changes within a node spacing (its nodes alone left 1.1e-3 mm there).
 """
 from __future__ import annotations
 
-import shutil
 
 import numpy as np
 import pytest
@@ -30,6 +29,7 @@ def mixer():
     return morph(SAMPLES / "mixer_segment.step", SAMPLES / "mixer_segment_field.npz")
 
 
+@pytest.mark.heavy
 def test_rotor37_morph_is_a_valid_closed_solid_near_the_field(rotor37, tmp_path):
     report = rotor37.report
     assert report.element_points == 4 * 22238                   # 4 points in each quadratic boundary triangle
@@ -55,6 +55,7 @@ def test_rotor37_trimming_curves_stay_tangent(rotor37):
         assert g["kink_before_max"] > 0.03 and g["kink_after_max"] <= g["hot_angle_max"] + 0.01, g
 
 
+@pytest.mark.heavy
 def test_mixer_morph_lobed_faces(mixer):
     """The lobed walls (48 x 20 poles hot) miss 1e-3 mm near the clamped inlet, where the field changes
     steeply (4.9e-3 and 3.9e-3 mm with the hot knots): refined, within 1e-3 at the nodes and at the points
@@ -72,7 +73,9 @@ def test_mixer_morph_lobed_faces(mixer):
     assert report.max_displacement > 3.0                            # the paper's mixer: about 3 mm
 
 
-@pytest.mark.skipif(shutil.which("ccx") is None, reason="CalculiX ccx is not installed")
+@pytest.mark.heavy
+@pytest.mark.calculix
+@pytest.mark.gmsh
 def test_step_to_gmsh_to_ccx_to_cold_step(tmp_path):
     from hot2cold.fe.calculix import LoadCase, MeshOptions, hot_to_cold_field
     step = SAMPLES / "twisted_blade.step"

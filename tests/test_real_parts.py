@@ -89,6 +89,7 @@ def test_tessellation_nodes_have_none_inside_a_plane(bench, block):
     inner = on_bottom & np.all((nodes[:, :2] > lo[:2] + 3.0) & (nodes[:, :2] < hi[:2] - 3.0), axis=1)
     assert not inner.any()           # the plane's triangulation has nodes on its boundary only
 
+@pytest.mark.heavy
 def test_affine_morph_of_the_filleted_block_is_exact(bench, tmp_path):
     run = bench.run_here(BLOCK, "fe", "affine", tmp_path)
     assert (run.exit_code, run.message) == (0, "")
@@ -109,6 +110,7 @@ def test_a_refused_run_is_recorded(bench, tmp_path, monkeypatch):
     assert run.valid is None and run.exact_max is None and not run.ok
 
 
+@pytest.mark.heavy
 def test_a_dying_or_hanging_child_is_recorded(bench, tmp_path):
     broken = tmp_path / "broken.step"
     broken.write_text("ISO-10303-21;\nnot a step file\n")
@@ -238,6 +240,7 @@ def test_vise_on_tessellation_nodes_morphs_under_both_fields(bench, tmp_path):
         assert run.exact_max <= (bench.AFFINE_TOLERANCE if field == "affine" else 5e-3), field
 
 
+@pytest.mark.heavy
 def test_offset_faces_of_the_build123d_hull_convert_closely(bench):
     """The hull's two offset faces (offsets of a Gordon B-spline surface): the kernel's B-spline conversion
     put them 4.0e-6 mm off (one degree-7 patch), so that a morph exact on the converted part missed an affine

@@ -31,6 +31,14 @@ from conftest import SAMPLES
 RNG = np.random.default_rng(4)
 
 
+@pytest.fixture(autouse=True)
+def _draws_of_its_own():
+    """Every test draws from a generator of its own, seeded alike: its random nets and points do not depend on
+    which tests ran before it in the same process (under ``-n 2`` that changes from run to run)."""
+    global RNG
+    RNG = np.random.default_rng(4)
+
+
 def _surface(rational):
     u = np.concatenate([np.zeros(4), [0.3, 0.6], np.ones(4)])
     v = np.concatenate([np.zeros(3), [0.5], np.ones(3)])
@@ -180,6 +188,7 @@ def _wave_band():
     return wire.extrude(20.0).val().wrapped
 
 
+@pytest.mark.heavy
 def test_tolerance_refines_a_face_that_cannot_follow_the_field(blade_1mm):
     """The blade's planar caps (2x2 bilinear nets) cannot bend: with a tolerance they are raised to cubic
     and refined, and then they follow the field (before: 4 rounds of knots alone left 1.1e-3 mm)."""
@@ -208,6 +217,7 @@ def blade_mild_field(tmp_path_factory, blade_1mm):
     return _write_field(tmp_path_factory.mktemp("mild") / "bend.csv", nodes, _bend(2e-4)(nodes))
 
 
+@pytest.mark.heavy
 def test_cli_tolerance_1e4_is_met_by_refinement(tmp_path, blade_mild_field, capsys):
     out, report = tmp_path / "cold.step", tmp_path / "report.json"
     code = main(["morph", str(SAMPLES / "twisted_blade.step"), str(blade_mild_field), "-o", str(out),
@@ -232,6 +242,7 @@ def test_cli_tolerance_1e4_is_met_by_refinement(tmp_path, blade_mild_field, caps
     assert checks[0].valid and checks[0].closed and checks[0].faces == 6
 
 
+@pytest.mark.heavy
 def test_cli_tolerance_missed_without_refinement_exits_5(tmp_path, blade_mild_field, capsys):
     out, report = tmp_path / "cold.step", tmp_path / "report.json"
     code = main(["morph", str(SAMPLES / "twisted_blade.step"), str(blade_mild_field), "-o", str(out),
@@ -253,6 +264,7 @@ def test_cli_refuses_negative_max_refinements(tmp_path, blade_mild_field, capsys
     assert "max_refinements" in capsys.readouterr().err
 
 
+@pytest.mark.heavy
 def test_edges_and_the_faces_sharing_them_are_refined_together():
     """The sector's arcs (rational quadratics) cannot follow the bend: they are raised to cubic and refined,
     and so are the cylinders whose side rows they are, with the same knots, so that each arc stays one edge
@@ -298,6 +310,7 @@ def test_edges_and_the_faces_sharing_them_are_refined_together():
     assert abs(volume(result.cold.wrapped) - hot) <= abs(volume(plain.cold.wrapped) - hot) / 5
 
 
+@pytest.mark.heavy
 def test_cli_exit_5_where_the_data_cannot_carry_the_tolerance(tmp_path, capsys):
     """A field with a kink (``dz = 0.02 |x - 20|``, a slope that jumps by 0.04 across the plane x = 20 mm) on
     the sector, nodes 1 mm apart: no spline follows a kink, and the spans across it are halved until they
@@ -334,6 +347,7 @@ def test_cli_exit_5_where_the_data_cannot_carry_the_tolerance(tmp_path, capsys):
     assert checks[0].valid and checks[0].closed
 
 
+@pytest.mark.heavy
 def test_refined_trimmed_band_face_stays_on_its_edges_and_keeps_thevolume():
     """The mixer's exit-face defect on a small part: a plane trimmed to a thin wavy band.  Refined by knots
     alone the bilinear plane could not follow its curved cold edges (the gap, sampled by the sew at 51
@@ -363,6 +377,7 @@ def test_refined_trimmed_band_face_stays_on_its_edges_and_keeps_thevolume():
     assert abs(volume(refined.cold.wrapped) - hot) <= abs(volume(plain.cold.wrapped) - hot) / 5
 
 
+@pytest.mark.heavy
 def test_a_face_with_nodes_only_on_its_edges_is_refined_from_them():
     """The wave band's planar top and bottom from a triangulation's vertices, as an STL or CFD surface mesh
     gives them: a plane's triangulation has vertices only on its boundary, so the band faces get no node of
@@ -395,6 +410,7 @@ def test_a_face_with_nodes_only_on_its_edges_is_refined_from_them():
     check_result(result)
 
 
+@pytest.mark.heavy
 def test_a_face_without_nodes_that_still_misses_between_them_is_not_met(tmp_path, capsys):
     """NIST Geom on a triangulation's vertices: a plane with no node of its own was refined for 8 rounds and
     still 0.059 mm off the field's estimate between its edges' nodes (2.9 mm off the exact cold geometry),
@@ -420,6 +436,7 @@ def test_a_face_without_nodes_that_still_misses_between_them_is_not_met(tmp_path
     assert out.exists()                                    # written: inaccurate, not wrong
 
 
+@pytest.mark.heavy
 def test_an_edge_its_few_nodes_just_determine_is_refined_from_the_field_between_them():
     """NIST Geom's defect on a cylinder: its circular edges (19 poles) keep 7 nodes each, the faces hundreds.
     Fitted to its nodes alone, a circle wanders between them under a bending field, and its faces with it
@@ -452,6 +469,7 @@ def test_an_edge_its_few_nodes_just_determine_is_refined_from_the_field_between_
     check_result(result)
 
 
+@pytest.mark.heavy
 def test_a_face_whose_nodes_do_not_fill_its_patches_is_measured_between_them():
     """Rotor 37's leading edge under 10 180 nodes: 158 nodes for 126 poles, so more nodes than poles, but 66
     knot-span patches that need 16 each to fix their cubic pieces; its shape between the nodes was the
@@ -489,6 +507,7 @@ def test_distance_past_a_border_is_across_the_surface():
     assert surface_distances(surface, points, uv) == pytest.approx([np.hypot(0.5, 0.01), 0.01])
 
 
+@pytest.mark.heavy
 def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(blade_1mm):
     """NIST CTC-04: edges refined to 9.7e-4 mm were turned at their corners afterwards and left their nodes by
     1.6e-3 mm.  A turn (or a G1-corrected face) that takes an edge or face farther off its nodes than the
@@ -520,6 +539,7 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
         assert bool(why) == refused and (not refused or why.startswith(f"turning face {k} would take it 0.00"))
 
 
+@pytest.mark.heavy
 def test_the_report_says_when_the_rounds_ran_out(blade_1mm):
     """A face that still misses when the most rounds allowed are done says so (the bundled twisted blade's
     CalculiX field needed 6 rounds; with the 4 of the default before, it missed by 1.46e-3 mm silently)."""
@@ -535,6 +555,7 @@ def test_the_report_says_when_the_rounds_ran_out(blade_1mm):
     assert not any("most rounds allowed" in line for line in met.report.table().splitlines())
 
 
+@pytest.mark.heavy
 def test_a_face_out_of_its_nodes_reach_is_named_not_measured(tmp_path, capsys):
     """A triangulation's vertices lie only on a plane's border: the bundled filleted block's 50 mm cap met the
     tolerance where its edges' nodes measured it and was 3e-3 mm off the exact cold geometry in its middle,
@@ -619,6 +640,7 @@ def test_refine_patches_halves_the_patches_at_the_points_in_their_classes():
     assert refine_patches(part, faces, edges, points, np.full(2, 1e3), fit_face, fit_edges, regrid) is None
 
 
+@pytest.mark.heavy
 def test_a_node_the_field_around_it_does_not_follow_is_not_chased(blade_1mm):
     """One node of a blade face 3e-3 mm off a smooth field that its neighbours follow (1 mm apart): no smooth
     face passes it and them, so once a round that refined the face for it leaves it where it was (above

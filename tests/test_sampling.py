@@ -224,6 +224,7 @@ def test_fe_surface_nodes_deterministic(block):
     assert a.shape != c.shape or not np.array_equal(a, c)
 
 
+@pytest.mark.heavy
 def test_volume_nodes_inside_with_margin(part):
     margin = 0.5
     pts = volume_nodes(part, 40, seed=0, margin=margin)

@@ -58,6 +58,7 @@ def solved(request, tmp_path_factory):
     return path, SOLVED[request.param], folder, code, err.getvalue()
 
 
+@pytest.mark.heavy
 def test_morph_from_solver_results(solved):
     path, unit_factor, folder, code, err = solved
     assert code == 0, err
@@ -80,6 +81,7 @@ def test_morph_from_solver_results(solved):
     assert np.abs(field.displacements[rows]).max() > 1e-3       # the corners did move, farther than that
 
 
+@pytest.mark.heavy
 def test_the_report_page_renders_in_chromium(solved, browser):
     """The page of each solver morph opens offline in headless Chromium (the browser of ``conftest.py``, the
     page session of ``tests/test_html_3d.py``): its 3D view draws the block, asks the network for nothing and

@@ -58,6 +58,7 @@ def test_threads_must_be_positive():
         Settings(threads=0)
 
 
+@pytest.mark.heavy
 def test_a_morph_in_two_threads_is_the_morph_in_one(block_shape, block_nodes, monkeypatch):
     """The filleted block under the untwist whose G1 refines faces along two edges (``test_g1``'s
     ``..._refined_along_the_edges_its_nets_cannot_close``): classification, refinement to the tolerance, G1

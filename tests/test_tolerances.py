@@ -66,6 +66,7 @@ def _lofted_blade():
     return cq.Solid.makeLoft([section(0, 0, 1.0), section(40, 25, 0.8), section(80, 50, 0.6)]).wrapped
 
 
+@pytest.mark.heavy
 def test_volume_and_areas_agree_with_a_fine_triangulation():
     """The kernel's default Gauss rule gave 15 441 mm³ for this blade of 19 690 mm³ (-22 %); the volume and
     the face areas the checks and the report use agree with a triangulation to 1 um to 1e-4 (5e-5 measured)."""

@@ -211,6 +211,7 @@ def _check_extension(result, exact_map):
     return out
 
 
+@pytest.mark.heavy
 def test_rotor37_trimmed_faces_follow_a_smooth_field(rotor37_morph):
     """Rotor 37, ROTOR_FIELD.  Measured (mm, largest over 0.5 mm samples): leading edge 1.6e-4, pressure side
     7.3e-4 (its knots allow 5.9e-4), suction side 2.2e-4, trailing edge 8.9e-5, hub and shroud sections 5.9e-5
@@ -231,6 +232,7 @@ def test_rotor37_untrimmed_extension_does_not_fold_or_bulge(rotor37_morph):
     _check_extension(rotor37_morph, ROTOR_FIELD.exact_map)
 
 
+@pytest.mark.heavy
 def test_cut_blade_trimmed_faces_follow_a_smooth_field(cut_blade_morph):
     """The twisted blade cut by two cylinders, BLADE_FIELD (1.3 mm at most).  Measured: at most 7.1e-5 mm on
     every face (aerofoil faces 2.2e-5 to 6.6e-5, the cylinder sections 2.9e-5 and 7.1e-5), the level the knots
@@ -266,6 +268,7 @@ def _data_rank(result, k: int) -> int:
     return int(np.linalg.matrix_rank(basis))
 
 
+@pytest.mark.heavy
 def test_a_hole_over_whole_knot_spans_leaves_no_rank_loss_and_no_bump(blade_shape):
     """The twisted blade, nodes 0.6 mm apart, with every node of face 1 removed over four whole knot spans of
     the section (u in [U_5, U_9]) along the whole span: 12 empty patches, and no node anywhere in the support
@@ -298,6 +301,7 @@ def test_a_hole_over_whole_knot_spans_leaves_no_rank_loss_and_no_bump(blade_shap
     assert deviation.max() <= 1e-3
 
 
+@pytest.mark.heavy
 def test_a_coarse_node_set_leaves_no_rank_loss_and_no_bump(blade_shape):
     """The twisted blade, nodes 5 mm apart (426; the 10 x 6 face holds 9 and the planar caps none): most
     knot-span patches hold fewer nodes than they have polynomial coefficients, and face 1's nodes alone leave

@@ -296,6 +296,7 @@ def bent_cube(tmp_path_factory):
     return step, field
 
 
+@pytest.mark.heavy
 def test_a_missed_tolerance_run_says_not_met_first_in_every_output(tmp_path, bent_cube, capsys):
     """The cube's 2x2 planes left unrefined (--max-refinements 0) at --tolerance 1e-4: exit 5, the cold STEP
     written, and the printed first line, the JSON report and the HTML page's headline say the same NOT met
@@ -326,6 +327,7 @@ def test_a_missed_tolerance_run_says_not_met_first_in_every_output(tmp_path, ben
     assert re.search(r"\d+ ignored: farther than [\d.e-]+ mm \(--node-distance\) from every face", nodes_line)
 
 
+@pytest.mark.heavy
 def test_a_missed_tolerance_run_without_a_report_leaves_one_beside_its_part(tmp_path, bent_cube, capsys):
     """Exit 5 with no --report: the report is written beside the cold STEP all the same, the one-line message
     names it, and it says NOT met first; a run that meets its tolerance writes no file it was not asked for."""

@@ -186,6 +186,7 @@ def test_mix_up_with_displacements_within_the_node_distance(block):
         check_positions(part, DisplacementField(f.points + d, -d, source="small.csv"), projector, Settings())
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("step, name", [
     ("twisted_blade.step", "twisted_blade_field.csv"), ("filleted_block.step", "filleted_block_field.csv"),
     ("mixer_segment.step", "mixer_segment_field.npz"), ("rotor37_blade.step", "rotor37_blade_field.npz")])
@@ -242,6 +243,7 @@ def test_no_unit_guess_off_a_unit_factor(tmp_path, capsys, box):
     assert "looks like" not in message and "inches" not in message
 
 
+@pytest.mark.heavy
 def test_inches_in_a_solver_file_are_not_converted(tmp_path, capsys, box):
     step, _, nodes, _ = box
     message = _refused(capsys, tmp_path, step, _frd(tmp_path / "inches.frd", nodes / 25.4, FIELD(nodes) / 25.4))

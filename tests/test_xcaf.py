@@ -77,6 +77,7 @@ def cli_run(assembly, tmp_path_factory):
     return code, out.getvalue(), cold, json.loads(report.read_text())
 
 
+@pytest.mark.heavy
 def test_quiet_run_with_names_and_colours_prints_nothing(assembly, tmp_path):
     """The names-and-colours writer (XCAF) is held quiet as the plain one: ``-q`` prints nothing, in a process
     of its own (the kernel prints past Python's streams)."""
@@ -102,6 +103,7 @@ def _tree(instance):
             tuple(_tree(c) for c in node.children))
 
 
+@pytest.mark.heavy
 def test_names_and_colours_survive_the_round_trip(cli_run, assembly):
     code, _, cold, _ = cli_run
     assert code == 0
@@ -130,6 +132,7 @@ def test_report_names_each_solid(cli_run):
     assert "solid 0 'blade': valid, closed" in table and "solid 1 'block': valid, closed" in table
 
 
+@pytest.mark.heavy
 def test_report_names_each_face(cli_run):
     """Issue 17: faces are named in the table and the JSON: by the STEP's name where it gives one, else by their
     surface kind and place (the blade's aerofoil faces are B-splines between planes at z = 0 and 100, the
@@ -166,6 +169,7 @@ def test_solid_and_face_order_kept(cli_run, assembly):
     np.testing.assert_allclose(back.faces[block_face0].surface.poles.reshape(-1, 3), x, atol=1e-7)
 
 
+@pytest.mark.heavy
 def test_same_input_same_cold_geometry(assembly, cli_run, tmp_path):
     """Two morphs in this process give bit-identical poles; the cold STEP of a third one, in a fresh process
     with another hash seed, holds bit-identical geometry."""
@@ -206,6 +210,7 @@ def _nameless_step(path, shape):
     return path
 
 
+@pytest.mark.heavy
 def test_step_without_names_still_works(tmp_path, parts, capsys):
     blade, box = parts
     hot = _nameless_step(tmp_path / "plain.step",
@@ -254,6 +259,7 @@ def test_styles_reader_refuses_as_the_plain_reader(tmp_path, make, words):
     assert str(styled.value) == str(plain.value)
 
 
+@pytest.mark.heavy
 def test_nested_assembly_with_a_part_placed_twice(tmp_path, capsys):
     """A sub-assembly (placed, with a half-transparent box and a cylinder with a coloured face) and one box
     placed twice from the same part: every solid morphed, the tree, names and colours kept."""

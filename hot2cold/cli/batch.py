@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from .. import __version__
-from ..errors import Hot2ColdError, InputError
+from ..errors import Hot2ColdError, InputError, one_line
 from ..io.inputs import check_input_file
 from .options import MorphOptions, to_path, to_text
 from .run import VIEWS, run_morph, tolerance_missed, view_outputs, write_cold, write_json, write_views
@@ -319,9 +319,6 @@ def _result(job: Job, status: str, exit_code: int | None, message: str = "", del
             "output": str(job.output), "report": None if job.report is None else str(job.report), **more}
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
 
 class _Warnings(logging.Handler):
     """The hot2cold warnings of this thread, kept for the job's result (a worker has no terminal)."""
@@ -377,10 +374,10 @@ def run_job(job: Job) -> dict:
         log.info("job %s: %s in %.1f s", job.name, status, out["seconds"])
         return out
     except Hot2ColdError as exc:
-        return _result(job, "failed", exc.exit_code, _one_line(exc), seconds=time.perf_counter() - start, **where)
+        return _result(job, "failed", exc.exit_code, one_line(exc), seconds=time.perf_counter() - start, **where)
     except Exception as exc:    # a bug or the unexpected: recorded like `hot2cold morph`'s internal error
         log.debug("job %s: internal error", job.name, exc_info=True)
-        return _result(job, "failed", 70, f"internal error: {type(exc).__name__}: {_one_line(exc)}",
+        return _result(job, "failed", 70, f"internal error: {type(exc).__name__}: {one_line(exc)}",
                        seconds=time.perf_counter() - start, **where)
     finally:
         logger.removeHandler(warnings)
@@ -437,7 +434,7 @@ def cores() -> int:
 
 
 def _died(job: Job, exc: BaseException) -> dict:
-    return _result(job, "failed", DIED, f"the worker process died running this job ({_one_line(exc)}): "
+    return _result(job, "failed", DIED, f"the worker process died running this job ({one_line(exc)}): "
                    f"a crash in the kernel or out of memory?")
 
 
@@ -479,7 +476,7 @@ def _in_pool(jobs: list[Job], workers: int, runner) -> Iterator[dict]:
                             suspects.append(job)
                     elif exc is not None:   # the runner could not be called (pickling) or raised
                         yield _result(job, "failed", 70, f"internal error: {type(exc).__name__}: "
-                                      f"{_one_line(exc)}")
+                                      f"{one_line(exc)}")
                     else:
                         yield future.result()
             clean = True
@@ -500,7 +497,7 @@ def _on_dask(jobs: list[Job], address: str, runner, Client, as_completed) -> Ite
     try:
         client = Client(address, timeout="20s")
     except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler at {address}: {_one_line(exc)}") from exc
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {one_line(exc)}") from exc
     with client:
         futures = {client.submit(runner, job, pure=False): job for job in jobs}
         try:
@@ -509,7 +506,7 @@ def _on_dask(jobs: list[Job], address: str, runner, Client, as_completed) -> Ite
                 try:
                     yield future.result()
                 except Exception as exc:    # KilledWorker (its worker died too often), a lost connection
-                    yield _result(job, "failed", DIED, f"Dask: {type(exc).__name__}: {_one_line(exc)}")
+                    yield _result(job, "failed", DIED, f"Dask: {type(exc).__name__}: {one_line(exc)}")
         finally:
             client.cancel(list(futures))
 

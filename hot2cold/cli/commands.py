@@ -7,7 +7,7 @@
 Every output is checked before the morph starts (its folder exists and is writable, it is neither input
 nor another output) and written whole or not at all.
 
-Exit codes: 0 success; 2 unusable input (file, field, option, output path; README "Bad input" lists them);
+Exit codes: 0 success; 2 unusable input (file, field, option, output path; docs/guide/bad_input.md lists them);
 3 kernel failure; 4 the cold part is not a valid closed solid, or it folds or crosses itself, or its STEP file
 does not read back as the valid closed solids written (nothing written but the report); 5 written, but
 --tolerance not met (the report written too, beside the STEP as COLD.report.json when --report was not

@@ -3,10 +3,11 @@
 ``hot2cold morph`` takes them as flags (``--field-units m``), a batch jobs file as columns or keys
 (``field_units``, also written ``field-units``); both come from the fields of :class:`MorphOptions`, whose
 metadata (an :class:`Option`) holds the flag, metavar, help text and the converter of a jobs-file value.
-The README's usage block and its list of batch options name the same options (a test compares them).
+The command-line guide's usage block and the batch guide's list of options (``docs/guide/``) name the same
+options (a test compares them); the docs' options reference is made from this table.
 
 A new option is one field here (with its :class:`Option`), its use in :meth:`MorphOptions.to_settings` or
-:meth:`MorphOptions.morph_arguments`, and a word in the README.
+:meth:`MorphOptions.morph_arguments`, and a word in ``docs/guide/cli.md``.
 
 Library code: nothing here prints; a bad value raises :class:`~hot2cold.errors.InputError` (options) or
 ``ValueError`` (a converter: the words that follow the option's name in the message).

@@ -57,7 +57,7 @@ VIEWS = ("vtu", "stl", "glb", "html")
 def view_outputs(views: dict) -> list[tuple[str, Path]]:
     """The files the ``views`` asked for (``{"vtu": path or None, ...}``) will be, as (what, path): a VTU is
     two files, the nodes and the cold surface beside them."""
-    from ..io.export import surface_path
+    from ..views.export import surface_path
 
     out = []
     for what in VIEWS:
@@ -74,7 +74,7 @@ def write_views(result, views: dict, scale: float | None = None) -> Iterator[Pat
     of a morph ``result``, yielding each path as soon as it is written; the cold surface is triangulated once
     for all of them.  ``scale``: the displacement magnification of the HTML report's pictures.  Raises
     :class:`OutputError` when one cannot be written (those before it stay written)."""
-    from ..io import export
+    from ..views import export
 
     surface = None
     if any(views.get(what) for what in ("vtu", "stl", "glb")):

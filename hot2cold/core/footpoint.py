@@ -9,7 +9,9 @@ dense sample of the face) by Newton's method on ``g = 0``, all nodes of a face a
 
 Where ``H`` is not positive definite (far from the surface, or across a ridge) the Gauss-Newton matrix
 ``J^T J`` takes its place, which always points downhill.  A node *settles* when its step falls below
-``STEP_RTOL`` of the parameter box, it lies inside the box, and its distance is no larger than its start's.
+``STEP_RTOL`` of the parameter box, it lies inside the box (or past its border by no more than that: a node
+on a face's edge, whose last step points out of the box or into it by the rounding of its zero), and its
+distance is no larger than its start's.
 Nodes that do not settle (the minimum lies on the box's border, Newton wanders, or it did not converge in
 ``MAX_ITERATIONS``) are for the caller to hand to the kernel's ``GeomAPI_ProjectPointOnSurf``, which stays
 the reference.
@@ -128,7 +130,8 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         step[bad] = 0.0
         target = uv[active] + step
         new = np.clip(target, lo, hi)
-        clamped = np.any(new != target, axis=1)
+        # pushed back into the box by more than a settling step (a node on the border settles either way)
+        clamped = np.any(np.abs(new - target) > STEP_RTOL * scale, axis=1)
         stuck = np.all(np.abs(new - uv[active]) <= STEP_RTOL * scale, axis=1)   # at the border, pushing out
         tiny = np.all(np.abs(step) <= STEP_RTOL * scale, axis=1)
         uv[active] = new

@@ -13,7 +13,7 @@ here is imported by ``import hot2cold``.
 """
 from .calculix import (ROOM_TEMPERATURE, ROTOR37_OMEGA, TI6AL4V, LoadCase, Material, MeshOptions, SolverOptions,
                        blade_temperature, hot_to_cold_field, hub_faces, read_hot_to_cold, run_ccx, write_deck)
-from .frd import FrdFile, FrdResult, read_frd
+from ..io.frd import FrdFile, FrdResult, read_frd
 from .mesh import SolverError, TetMesh, mesh_step
 
 __all__ = ["SolverError", "TetMesh", "mesh_step", "Material", "TI6AL4V", "ROOM_TEMPERATURE", "ROTOR37_OMEGA",

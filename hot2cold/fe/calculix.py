@@ -48,7 +48,7 @@ import numpy as np
 from ..errors import FieldError
 from ..io.atomic import write_atomically
 from ..io.field import DisplacementField, match_points
-from .frd import HOT_TO_COLD_HEADING, FrdFile
+from ..io.frd import HOT_TO_COLD_HEADING, FrdFile
 from .mesh import SolverError, TetMesh, mesh_step, step_bounding_box
 
 __all__ = ["Material", "TI6AL4V", "write_deck", "run_ccx", "read_hot_to_cold", "hot_to_cold_field",
@@ -344,11 +344,11 @@ def read_hot_to_cold(frd_path, points_from=None) -> DisplacementField:
     """The hot -> cold field from the ``.frd`` of a :func:`write_deck` deck, mm.
 
     Two displacement blocks (a rotating part): ``U(last) - U(first)``; one block: that block
-    (:meth:`hot2cold.fe.frd.FrdFile.hot_to_cold`; ``read_field`` does the same for an ``.frd`` whose
+    (:meth:`hot2cold.io.frd.FrdFile.hot_to_cold`; ``read_field`` does the same for an ``.frd`` whose
     heading marks it as hot2cold's).  Node positions from ``points_from`` (the :class:`TetMesh` of the run,
     or see :func:`hot2cold.io.field.match_points`), else the ``.frd``'s own 6-digit ones; ``node_ids`` the
     CalculiX node numbers; ``triangles`` the boundary triangles of the ``.frd``'s tetrahedra
-    (:attr:`hot2cold.fe.frd.FrdResult.triangles`).
+    (:attr:`hot2cold.io.frd.FrdResult.triangles`).
     """
     frd = FrdFile.read(frd_path)
     result = frd.hot_to_cold()

@@ -63,7 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hot2cold.errors import FieldError
+from ..errors import FieldError, one_line
 
 __all__ = ["AnsysResult", "read_rst", "UNIT_SYSTEMS"]
 
@@ -471,5 +471,6 @@ def _triangles(rst, node_ids: np.ndarray, path: str) -> np.ndarray | None:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
+    """:func:`~hot2cold.errors.one_line`, cut to 200 characters (the reader's own messages can be long)."""
+    text = one_line(exc)
     return text if len(text) <= 200 else text[:197] + "..."

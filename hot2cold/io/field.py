@@ -24,7 +24,7 @@ integer rows of ``points`` gives the FE model's boundary triangles (:attr:`Displ
 
 *CalculiX results* ``.frd`` (ASCII; recognised by the extension or by its first record ``    1C``): the
 node block and the last ``DISP`` result block (or the block chosen by ``step``, counting ``DISP`` blocks
-from 0; or the dataset named by ``field_name``), read by fixed columns (:mod:`hot2cold.fe.frd`).  The
+from 0; or the dataset named by ``field_name``), read by fixed columns (:mod:`hot2cold.io.frd`).  The
 ``.frd`` of a hot2cold hot-to-cold deck (:mod:`hot2cold.fe.calculix`, recognised by its heading) gives its
 hot -> cold field: for a rotating part the last ``DISP`` block minus the first.
 ``node_ids`` are the CalculiX node numbers; the element block's tetrahedra (C3D4, C3D10) give the boundary
@@ -70,13 +70,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hot2cold.errors import FieldError
+from ..errors import FieldError, one_line
+from .cells import ELEMENT_NAMES as _ELEMENT_NAMES
+from .cells import element_triangles
 
 from .columns import HINT, ID_COLUMNS, REQUIRED_COLUMNS, STATED_UNITS, assign, normalise, parse_mapping
 from .inputs import read_input_bytes
 
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
-           "as_field", "match_points", "merge_duplicates", "element_triangles", "DUPLICATE_RTOL",
+           "as_field", "match_points", "merge_duplicates", "DUPLICATE_RTOL",
            "DUPLICATE_DISPLACEMENT_RTOL"]
 
 log = logging.getLogger(__name__)
@@ -139,7 +141,7 @@ class DisplacementField:
                 a = np.array(given, dtype=np.float64, order="C", copy=True)
             except (TypeError, ValueError) as exc:
                 raise FieldError(
-                    f"field{where}: {name} is not an array of numbers ({_one_line(exc)}); "
+                    f"field{where}: {name} is not an array of numbers ({one_line(exc)}); "
                     f"pass an (N, 3) array of floats") from None
             if a.ndim != 2 or a.shape[1] != 3:
                 raise FieldError(
@@ -172,7 +174,7 @@ class DisplacementField:
                 ids = np.array(ids_f, dtype=np.int64, order="C", copy=True)
             except (TypeError, ValueError, OverflowError) as exc:
                 raise FieldError(
-                    f"field{where}: node_ids must be integers ({_one_line(exc)}); "
+                    f"field{where}: node_ids must be integers ({one_line(exc)}); "
                     f"pass integer ids or node_ids=None") from None
             if ids.shape != (len(p),):
                 raise FieldError(
@@ -197,7 +199,7 @@ class DisplacementField:
                 raise ValueError(f"dtype {tri.dtype}")
             tri = np.array(tri, dtype=np.int64, order="C", copy=True)
         except (TypeError, ValueError, OverflowError) as exc:
-            raise FieldError(f"field{where}: triangles must be integer node rows ({_one_line(exc)})") from None
+            raise FieldError(f"field{where}: triangles must be integer node rows ({one_line(exc)})") from None
         if tri.ndim != 2 or tri.shape[1] not in (3, 6):
             raise FieldError(f"field{where}: triangles must have shape (T, 3) or (T, 6), got shape {tri.shape}; "
                              f"pass the corner (and midside) node rows of each boundary triangle")
@@ -464,9 +466,6 @@ def _fmt(v) -> str:
     return ", ".join(f"{float(x):.6g}" for x in v)
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
 
 def _unit_factor(units) -> float:
     key = units.strip().lower() if isinstance(units, str) else None
@@ -494,7 +493,7 @@ def _parse_npz(path: str, field_name: str | None = None) -> DisplacementField:
         raise
     except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled objects), OSError, ...
         raise FieldError(
-            f"cannot read field file {path} as .npz: {_one_line(exc)}; "
+            f"cannot read field file {path} as .npz: {one_line(exc)}; "
             f"save it with np.savez(path, points=..., displacements=...)") from None
     return DisplacementField(points, displacements, node_ids, source=path, triangles=triangles)
 
@@ -549,7 +548,7 @@ def _kind(path: str, raw: bytes) -> str:
 
 
 def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from) -> DisplacementField:
-    from ..fe.frd import FrdFile
+    from .frd import FrdFile
 
     frd = FrdFile(raw.decode("latin-1"), path)
     if field_name is None and step is None and frd.is_hot_to_cold():
@@ -701,57 +700,6 @@ def _mesh_triangles(mesh, path: str) -> np.ndarray | None:
     return element_triangles({k: v for k, v in cells.items() if k in _ELEMENT_NAMES}, path)
 
 
-#: Element types :func:`element_triangles` takes (meshio's names) -> their node count.
-_ELEMENT_NAMES = {"tetra": 4, "tetra10": 10, "triangle": 3, "triangle6": 6}
-
-
-def element_triangles(elements, source: str = "") -> np.ndarray | None:
-    """The boundary triangles of a mesh's elements: ``(T, 3)`` or ``(T, 6)`` int64, in the elements' node
-    labels (rows of the points, or node numbers).
-
-    ``elements`` maps meshio's type names to node arrays (or lists of them) in the VTK node order:
-    ``tetra`` ``(M, 4)``, ``tetra10`` ``(M, 10)``, ``triangle`` ``(T, 3)``, ``triangle6`` ``(T, 6)``; other
-    keys are ignored.  Tetrahedra give their boundary (:func:`hot2cold.core.elements.boundary_triangles`: the
-    faces no second tetrahedron shares), and any triangles beside them are not used; without tetrahedra the
-    triangles (a surface mesh) are taken as they are.  4- and 10-node elements mixed give the linear
-    triangles of all (their corners), logged.  None when there is no tetrahedron or triangle.
-    """
-    from ..core.elements import boundary_triangles
-
-    where = f" {source}" if source else ""
-    arrays: dict[str, np.ndarray] = {}
-    for name, nodes in _ELEMENT_NAMES.items():
-        given = elements.get(name)
-        if given is None:
-            continue
-        blocks = isinstance(given, (list, tuple)) and all(isinstance(a, np.ndarray) and a.ndim == 2 for a in given)
-        parts = list(given) if blocks else [given]
-        try:
-            parts = [np.asarray(a) for a in parts if np.size(a)]
-            for a in parts:
-                if a.dtype.kind not in "iu":
-                    raise ValueError(f"dtype {a.dtype}")
-                if a.ndim != 2 or a.shape[1] != nodes:
-                    raise ValueError(f"shape {a.shape}")
-            conn = np.concatenate([a.astype(np.int64) for a in parts]) if parts else np.zeros((0, nodes), np.int64)
-        except (TypeError, ValueError) as exc:
-            raise FieldError(f"mesh{where}: the {name} elements are not ({nodes}-node) integer node rows "
-                             f"({_one_line(exc)})") from None
-        if len(conn):
-            arrays[name] = conn
-    for solid, linear, quadratic in ((True, "tetra", "tetra10"), (False, "triangle", "triangle6")):
-        if linear in arrays and quadratic in arrays:
-            log.info("mesh%s: %s and %s elements mixed: the boundary is taken with straight (3-node) triangles",
-                     where, linear, quadratic)
-            conn = np.concatenate([arrays[linear], arrays[quadratic][:, :(4 if solid else 3)]])
-        elif linear in arrays or quadratic in arrays:
-            conn = arrays.get(linear, arrays.get(quadratic))
-        else:
-            continue
-        return boundary_triangles(conn) if solid else conn
-    return None
-
-
 def _meshio_read(meshio, path: str, file_format: str | None):
     """``meshio`` reading ``path``, quietly.
 
@@ -780,7 +728,7 @@ def _meshio_read(meshio, path: str, file_format: str | None):
                 except SystemExit:
                     problems.append(f"{fmt}: unreadable")
                 except Exception as exc:  # meshio raises ReadError, KeyError, ValueError, ... on bad files
-                    problems.append(f"{fmt}: {_one_line(exc)}")
+                    problems.append(f"{fmt}: {one_line(exc)}")
     finally:
         if sink.getvalue().strip():
             log.debug("meshio on %s: %s", path, " ".join(sink.getvalue().split()))

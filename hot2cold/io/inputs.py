@@ -1,9 +1,9 @@
 """Input files refused before anything is read from them, with one wording for every caller.
 
-The words are the command line's, which the README's "Bad input" table documents: ``WHAT not found: PATH;
-check the path``, ``WHAT PATH is a folder: give the file itself``, ``cannot read WHAT PATH: permission denied;
-check its permissions`` and (where the caller asks) ``WHAT is empty: PATH``.  The error keeps the caller's
-class: :class:`~hot2cold.errors.StepReadError` for STEP files, :class:`~hot2cold.errors.FieldError` for
+The words are the command line's, which the "Bad input" table of the docs (``docs/guide/bad_input.md``) documents:
+``WHAT not found: PATH; check the path``, ``WHAT PATH is a folder: give the file itself``, ``cannot read WHAT PATH:
+permission denied; check its permissions`` and (where the caller asks) ``WHAT is empty: PATH``.  The error keeps the
+caller's class: :class:`~hot2cold.errors.StepReadError` for STEP files, :class:`~hot2cold.errors.FieldError` for
 fields, :class:`~hot2cold.errors.InputError` on the command line.
 """
 from __future__ import annotations

@@ -11,9 +11,9 @@
 * :func:`check_cold`: no cold face folded over, no solid turned inside out or crossing itself, no face moved
   farther than the field moves its nodes or away from the field between them, no volume changed beyond what
   the field's strain allows (:class:`FieldScale`);
-* :func:`check_result`: refuses a result that failed any of them or that the kernel finds invalid or open
-  (:class:`MorphError`); :func:`~hot2cold.pipeline.morph.morph` calls it (unless ``check=False``) and so does
-  :meth:`~hot2cold.pipeline.morph.MorphResult.write_step` before it writes.
+* :func:`~hot2cold.pipeline.result.check_result`: refuses a result that failed any of them or that the kernel
+  finds invalid or open (:class:`MorphError`); :func:`~hot2cold.pipeline.morph.morph` calls it (unless
+  ``check=False``) and so does :meth:`~hot2cold.pipeline.result.MorphResult.write_step` before it writes.
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from ..core.trees import kd_tree
 from ..core.bspline import (NORMAL_RTOL, cross, evaluate_curve, evaluate_surface, knot_breaks, surface_basis,
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
-from ..errors import FieldError, InputError, KernelError, MorphError
+from ..errors import FieldError, InputError, KernelError
 from .classify import Starts, curve_length, part_distances
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
@@ -45,27 +45,8 @@ from ..settings import Settings
 
 if TYPE_CHECKING:
     from .artificial import ElementField
-    from .morph import MorphResult
 
 log = logging.getLogger(__name__)
-
-
-def check_result(result: MorphResult) -> None:
-    """Raise :class:`MorphError` unless every cold solid is valid, closed, has its faces and came through the
-    checks after the sew (no face folded over, not inside out, not crossing itself)."""
-    if result.problems:
-        more = len(result.problems) - 1
-        also = f" (and {more} more problem{'s' if more > 1 else ''}, see the log)" if more else ""
-        raise MorphError(f"{result.problems[0]}{also}: the displacements are too large for this part (check the "
-                         f"field's units and scale, and that it belongs to this part); not written")
-    for s, hot_faces in zip(result.report.solids, result.part.solids):
-        if not s.valid:
-            fault = solid_fault(result.cold_kernel.shape, s.index) or "BRepCheck"
-            raise MorphError(f"cold solid {s.index} is not valid: {fault}; not written")
-        if not s.closed:
-            raise MorphError(f"cold solid {s.index} has {s.free_edges} free edges; not written")
-        if s.faces != len(hot_faces):
-            raise MorphError(f"cold solid {s.index} has {s.faces} faces, the hot one {len(hot_faces)}")
 
 
 def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:

@@ -12,8 +12,8 @@ grid dense only where the face bends (knot span by knot span, :func:`start_grid`
 side of a thin edge where a start there is among its nearest (:func:`_foot_points`); the kernel's
 ``GeomAPI_ProjectPointOnSurf`` settles what Newton leaves open (a few per thousand nodes, near the faces'
 borders).  The result is the kernel's: the same faces, distances and parameters to 1e-9 as every node
-projected onto every face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; the README's "Speed and
-scale" gives how much faster, on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
+projected onto every face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; ``docs/benchmarks/speed.md``
+gives how much faster, on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
 """
 from __future__ import annotations
 

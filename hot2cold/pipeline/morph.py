@@ -21,7 +21,6 @@ import time
 from contextlib import nullcontext
 from dataclasses import asdict, dataclass, replace
 from dataclasses import field as dataclass_field
-from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -30,7 +29,7 @@ from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
 from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage, check_hot, check_positions,
-                     check_result, edge_grids, face_grids, with_slack)
+                     edge_grids, face_grids, with_slack)
 from .classify import Starts, classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
@@ -42,10 +41,8 @@ from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
-from ..kernel.rebuild import ColdKernel, rebuild
+from ..kernel.rebuild import rebuild
 from ..kernel.tolerances import fit_tolerances
-from ..kernel.shapes import to_cadquery
-from ..kernel.step import write_step
 from .load import element_points, load_part
 from ..core.bspline import BSplineCurve, BSplineSurface, clip_uv, evaluate_surface
 from ..core.footpoint import surface_distances_above
@@ -54,7 +51,8 @@ from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
 from ..core.threads import map_threads
 from .refine import TARGET_SHARE, Regrid, Targets, edge_errors, noise_allowance, refine, refine_patches
-from .report import Checks, Fits, Report, build_report, node_errors
+from .report import Checks, Fits, build_report, node_errors
+from .result import MorphResult, check_result
 from ..settings import Continuity, Settings
 
 __all__ = ["MorphContext", "MorphResult", "Progress", "check_result", "morph"]
@@ -91,75 +89,6 @@ _G1_GAIN = 0.5
 
 #: ``progress(stage, done, total)``: called as the morph goes on (stage names as in the module docstring).
 Progress = Callable[[str, int, int], None]
-
-
-@dataclass(eq=False)
-class MorphResult:
-    """What a morph gives back.
-
-    Attributes
-    ----------
-    report : Report, accuracy and checks.
-    part, classification, faces, edges : the intermediate records, for inspection (``part`` is the hot part,
-        refined where a tolerance asked for it; its kernel side is the hot part's as loaded).
-    field : DisplacementField, the field used (hot positions and hot-to-cold displacements, inverted if
-        asked), one row per entry of ``classification``: a node on coincident faces of two solids is in it
-        once per solid it feeds (``classification.node`` gives the row of the field as given).
-    node_errors : (N,) float array, each entry's distance (mm) to the cold part (eq. 21); NaN where ignored.
-    cold_kernel : ColdKernel, the cold part's kernel shape with its faces, edges and vertices in the part's
-        numbering (``cold`` wraps its shape).
-    problems : tuple of str, what the checks after the sew found wrong with the cold part (a face folded
-        over, a solid turned inside out or crossing itself; such solids are reported invalid), one line each;
-        :func:`check_result` raises on them.
-
-    ``cold`` and ``hot`` are the parts as CadQuery shapes, made when first asked for (CadQuery and VTK take
-    about 1.5 s to import, which a morph on the command line does not need).
-    """
-
-    report: Report
-    part: Part
-    classification: Classification
-    faces: list[FaceMorph]
-    edges: list[EdgeMorph]
-    field: DisplacementField
-    node_errors: np.ndarray
-    cold_kernel: ColdKernel
-    problems: tuple[str, ...] = ()
-
-    @cached_property
-    def cold(self):
-        """cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one."""
-        return to_cadquery(self.cold_kernel.shape)
-
-    @cached_property
-    def hot(self):
-        """cadquery.Shape, the hot part in B-spline form, parameterised as the cold one."""
-        return to_cadquery(self.part.kernel.hot)
-
-    def write_step(self, path: str | os.PathLike) -> None:
-        """Write the cold part to a STEP file (atomically).
-
-        When the hot STEP carried names or colours, the cold file is written through XCAF with the hot
-        file's assembly tree and the names and colours of its solids and faces (hot solid i is cold
-        solid i, hot face k cold face k); otherwise as a plain shape.
-
-        Raises
-        ------
-        MorphError : the cold part fails :func:`check_result` (a result of ``morph(..., check=False)``), or
-            the file, read back, does not hold its solids valid, closed and with their faces
-            (:func:`hot2cold.kernel.step.read_back`); nothing is written.
-        """
-        from ..kernel.xcaf import write_step_styles
-
-        check_result(self)
-        styles = self.part.styles
-        if styles is not None and styles.placed:
-            write_step_styles(self.cold_kernel.shape, styles, path, verify=True)
-            return
-        if styles is not None:
-            log.warning("the hot STEP's names and colours could not be placed on the cold part; "
-                        "writing %s without them", path)
-        write_step(self.cold_kernel.shape, path, verify=True)
 
 
 @dataclass(frozen=True, eq=False)

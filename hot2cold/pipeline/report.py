@@ -10,7 +10,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -22,10 +22,18 @@ from ..kernel.validity import SolidCheck, face_areas
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
 from ..core.threads import map_threads
+from ..settings import Settings
 from .checks import GRID_REACH
 
-if TYPE_CHECKING:
-    from .morph import MorphContext
+
+class Morphed(Protocol):
+    """What :func:`build_report` reads of a morph (:class:`~hot2cold.pipeline.morph.MorphContext` has it): the
+    (refined) part, the classification of the field's nodes, the field and the settings."""
+
+    part: Part
+    classification: Classification
+    field: DisplacementField
+    settings: Settings
 
 
 @dataclass(frozen=True)
@@ -627,7 +635,7 @@ class Checks:
     farthest_node: np.ndarray | None = None
 
 
-def build_report(context: MorphContext, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
+def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
                  timings: dict[str, float] | None = None, inversion: dict | None = None, scatter: float = 0.0,
                  allowance: float = 0.0, element_points: int = 0) -> Report:
     """Assemble the :class:`Report` of a morph.

@@ -41,7 +41,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from ..core.bspline import BSplineSurface, clip_uv, evaluate_curve, mean_curvature, surface_derivatives
 from ..core.model import Role
-from ..io.export import points_on_faces
+from .export import points_on_faces
 from ..kernel.tessellate import TriangleMesh, tessellate
 
 log = logging.getLogger(__name__)
@@ -105,7 +105,7 @@ def _face_vertices(mesh: TriangleMesh, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def cold_vertices(result, mesh: TriangleMesh) -> np.ndarray:
     """Each mesh vertex moved onto the cold part: ``S_cold(u, v)`` of its face (same parameters as hot,
-    :func:`hot2cold.io.export.points_on_faces`); a vertex without ``(u, v)`` or triangle stays where it is."""
+    :func:`hot2cold.views.export.points_on_faces`); a vertex without ``(u, v)`` or triangle stays where it is."""
     cold = points_on_faces([fm.surface for fm in result.faces], mesh)
     missing = np.isnan(cold).any(axis=1)
     cold[missing] = mesh.vertices[missing]

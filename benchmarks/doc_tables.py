@@ -1,18 +1,18 @@
-"""The README's tables of what the tool prints for the bundled parts, made by the tool itself.
+"""The docs' tables of what the tool prints for the bundled parts, made by the tool itself.
 
-    python benchmarks/readme_tables.py            # write the tables into README.md
-    python benchmarks/readme_tables.py --check    # exit 1 and say which table differs from what the tool prints
-    python benchmarks/readme_tables.py --only rotor37
+    python benchmarks/doc_tables.py            # write the tables into the docs' pages
+    python benchmarks/doc_tables.py --check    # exit 1 and say which table differs from what the tool prints
+    python benchmarks/doc_tables.py --only rotor37
 
-Each table sits in the README between ``<!-- readme_tables: NAME -->`` and ``<!-- /readme_tables -->``; this
-script morphs its part with its bundled field by default (``hot2cold morph`` without options) and writes the
-rows from the report: per face its name, FE nodes (and points taken inside the FE elements), control points
-hot -> cold, Δmax and Δmean at the nodes, Δ between the nodes; then the part's line (valid, exit code) and
-one row per tangent edge of G1 (kink before and after, hot angle).  Nothing measured by the clock goes into
-them.  A figure at the level of round-off (below :data:`ROUNDOFF_MM` or :data:`ROUNDOFF_DEG`) is written as
-"< 1e-09" and so on: its digits change with the processor, the BLAS build and its threads, and no user decides
-anything on them.  ``--check`` (``tests/test_readme_tables.py``) compares a table's words, counts and
-verdicts exactly and each other figure to the precision it is printed with (:func:`differences`).
+Each table sits in one of the docs' :data:`PAGES` between ``<!-- doc_tables: NAME -->`` and
+``<!-- /doc_tables -->``; this script morphs its part with its bundled field by default (``hot2cold morph`` without
+options) and writes the rows from the report: per face its name, FE nodes (and points taken inside the FE elements),
+control points hot -> cold, Δmax and Δmean at the nodes, Δ between the nodes; then the part's line (valid, exit
+code) and one row per tangent edge of G1 (kink before and after, hot angle).  Nothing measured by the clock goes
+into them.  A figure at the level of round-off (below :data:`ROUNDOFF_MM` or :data:`ROUNDOFF_DEG`) is written as "<
+1e-09" and so on: its digits change with the processor, the BLAS build and its threads, and no user decides anything
+on them.  ``--check`` (``tests/test_doc_tables.py``) compares a table's words, counts and verdicts exactly and each
+other figure to the precision it is printed with (:func:`differences`).
 
 Tables (``--only``, default all): ``rotor37`` (about 20 s), ``mixer`` (about 2 minutes), ``twisted_blade``,
 ``g1`` (the largest kinks before and after G1 and Δmax with and without it on four parts and fields, about
@@ -27,7 +27,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_parts"
-README = ROOT / "README.md"
+#: The pages that hold the tables.
+PAGES = (ROOT / "docs" / "benchmarks" / "bundled_parts.md", ROOT / "docs" / "guide" / "cli.md")
 
 #: Each table: the part and its bundled field, and the words for its faces where its STEP names none (as
 #: the script that made the part builds them).
@@ -42,7 +43,7 @@ TABLES = {
 
 #: A table's place: its markers, indented as the text around them (a table inside a list item), and between them
 #: the table, indented the same.
-_BLOCK = re.compile(r"^(( *)<!-- readme_tables: (\w+) -->\n)(.*?)(^\2<!-- /readme_tables -->)", re.S | re.M)
+_BLOCK = re.compile(r"^(( *)<!-- doc_tables: (\w+) -->\n)(.*?)(^\2<!-- /doc_tables -->)", re.S | re.M)
 
 
 #: Distances [mm] and angles [°] below these are round-off, not results: the tables say "< 1e-09" for them.
@@ -73,10 +74,10 @@ def _unit(match: re.Match) -> float:
 
 
 def differences(written: str, made: str) -> list[str]:
-    """The lines where table ``made`` (as the tool prints it now) says otherwise than ``written`` (the README's).
+    """The lines where table ``made`` (as the tool prints it now) says otherwise than ``written`` (the page's).
 
     Words, counts (integers) and verdicts must be the same to the letter; a figure printed with decimals
-    may differ by one unit of the last digit the README states (a rounding of the same value that round-off
+    may differ by one unit of the last digit the page states (a rounding of the same value that round-off
     tipped the other way).  Figures at the round-off level are the same text ("< 1e-09") on both sides.
     Returns one line per difference, ``written -> made``; empty where the two agree.
     """
@@ -175,23 +176,26 @@ def main(argv=None) -> int:
     unknown = sorted(set(names) - set(TABLES))
     if unknown:
         parser.error(f"unknown table(s) {', '.join(unknown)}: choose from {', '.join(TABLES)}")
-    text = README.read_text(encoding="utf-8")
-    blocks = {m.group(3): m for m in _BLOCK.finditer(text)}
+    texts = {page: page.read_text(encoding="utf-8") for page in PAGES}
+    blocks = {m.group(3): (page, m) for page, text in texts.items() for m in _BLOCK.finditer(text)}
     missing = [n for n in names if n not in blocks]
     if missing:
-        print(f"README.md has no block for {', '.join(missing)} (<!-- readme_tables: NAME -->)", file=sys.stderr)
+        print(f"no page of the docs has a block for {', '.join(missing)} (<!-- doc_tables: NAME -->)",
+              file=sys.stderr)
         return 2
-    made = {n: _indented(g1_table() if n == "g1" else table(n), blocks[n].group(2)) for n in names}
-    found = {n: differences(blocks[n].group(4), made[n]) for n in names}
+    made = {n: _indented(g1_table() if n == "g1" else table(n), blocks[n][1].group(2)) for n in names}
+    found = {n: differences(blocks[n][1].group(4), made[n]) for n in names}
     differ = [n for n in names if found[n]]
     if args.check:
         for n in differ:
-            print(f"README table {n} differs from what the tool prints now:\n  " + "\n  ".join(found[n]),
-                  file=sys.stderr)
+            print(f"{blocks[n][0].relative_to(ROOT)}: table {n} differs from what the tool prints now:\n  "
+                  + "\n  ".join(found[n]), file=sys.stderr)
         return 1 if differ else 0
-    new = _BLOCK.sub(lambda m: m.group(1) + made.get(m.group(3), m.group(4)) + m.group(5), text)
-    README.write_text(new, encoding="utf-8")
-    print(f"README.md: {', '.join(differ) or 'no table'} rewritten")
+    for page, text in texts.items():
+        new = _BLOCK.sub(lambda m: m.group(1) + made.get(m.group(3), m.group(4)) + m.group(5), text)
+        if new != text:
+            page.write_text(new, encoding="utf-8")
+    print(f"{', '.join(differ) or 'no table'} rewritten")
     return 0
 
 

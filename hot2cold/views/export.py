@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.bspline import clip_uv, evaluate_surface
-from .atomic import write_atomically
+from ..io.atomic import write_atomically
 
 log = logging.getLogger(__name__)
 

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FieldError
+from .cells import element_triangles
 
 __all__ = ["FrdFile", "FrdResult", "parse_frd", "read_frd", "HOT_TO_COLD_HEADING", "ELEMENT_NODES",
            "ELEMENT_TYPES"]
@@ -421,11 +422,9 @@ class FrdFile:
         return self._elements
 
     def boundary_triangles(self) -> np.ndarray | None:
-        """The boundary triangles of :attr:`elements` (:func:`hot2cold.io.field.element_triangles`), ``(T, 3)``
+        """The boundary triangles of :attr:`elements` (:func:`hot2cold.io.cells.element_triangles`), ``(T, 3)``
         or ``(T, 6)`` int64 node numbers; None when the file has no tetrahedra or triangles."""
         if self._boundary is None:
-            from ..io.field import element_triangles
-
             cells = {ELEMENT_TYPES[t]: conn for t, conn in self.elements.items()}
             tri = element_triangles(cells, self.path)
             self._boundary = np.zeros((0, 3), np.int64) if tri is None else tri
