@@ -10,8 +10,10 @@ import sys
 import warnings
 from pathlib import Path
 
+import ansys.mapdl.reader as mapdl_reader      # the test extra's: a missing one fails, not skips
 import numpy as np
 import pytest
+from ansys.mapdl.reader import examples
 
 from hot2cold.errors import FieldError
 from hot2cold.io.ansys import UNIT_SYSTEMS, read_rst
@@ -19,8 +21,6 @@ from hot2cold.io.ansys import UNIT_SYSTEMS, read_rst
 ROOT = Path(__file__).resolve().parent.parent
 CORPUS = ROOT / "corpus" / "solver_results" / "ansys"
 
-mapdl_reader = pytest.importorskip("ansys.mapdl.reader")
-from ansys.mapdl.reader import examples  # noqa: E402
 
 #: name -> (path, unit, result sets, solid volume in its units (outer triangles), bounds (lo, hi))
 FILES = {

@@ -41,7 +41,7 @@ from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
 from .invert import invert_field
 from ..kernel.validity import check_solids
 from ..kernel.project import Projector
-from ..kernel.rebuild import rebuild
+from ..kernel.rebuild import ColdKernel, rebuild
 from ..kernel.tolerances import fit_tolerances
 from .load import element_points, load_part
 from ..core.bspline import BSplineCurve, BSplineSurface, clip_uv, evaluate_surface
@@ -739,8 +739,222 @@ def _classified(part, field: DisplacementField, settings: Settings, projector: P
     return cls, field, noise
 
 
+@dataclass(frozen=True, eq=False)
+class _Classified:
+    """The field's nodes on the part (METHOD step 2) and what they tell of the field.
+
+    Attributes
+    ----------
+    projector : Projector onto the hot faces and edges.
+    classification : Classification of the rows of ``field``.
+    field : DisplacementField as classified (a row per solid a node feeds, displacements carried to the foot
+        points; with the points inside the FE elements where they were taken).
+    fe_field : DisplacementField as read (and inverted): its nodes and elements.
+    noise : float, its scatter about a smooth field (mm per component).
+    allowance : float, what the scatter adds to the tolerance at the nodes (mm).
+    element_points : int, how many rows of ``field`` are points inside the FE elements (0: none taken).
+    scale : FieldScale, how far and with what strain the field moves the part.
+    """
+
+    projector: Projector
+    classification: Classification
+    field: DisplacementField
+    fe_field: DisplacementField
+    noise: float
+    allowance: float
+    element_points: int
+    scale: FieldScale
+
+
+def _classify(part: Part, field: DisplacementField, settings: Settings, inverted: bool) -> _Classified:
+    """Classify ``field`` on ``part`` (checked: hot and cold not mixed up, every face covered) and, where it is
+    smooth, again with the points inside its FE elements (:func:`~hot2cold.pipeline.load.element_points`)."""
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    starts = Starts(part)
+    cls, classified, noise = _classified(part, field, settings, projector, starts, inverted=inverted)
+    added = 0
+    if noise <= NOISY_SHARE * (settings.tolerance or np.inf):      # a smooth field: taken inside its elements
+        dense, added = element_points(field, settings)
+        if added:
+            # its nodes covered the part (checked, warned once); the points inside the elements add to them
+            cls, classified, noise = _classified(part, dense, settings, projector, starts, check=False)
+    allowance = noise_allowance(noise, int(cls.used.sum()))
+    if noise > NOISY_SHARE * (settings.tolerance or np.inf):
+        log.info("the field scatters by %.3g mm about a smooth field (per component): the fits are smoothed "
+                 "and the tolerance at the nodes is widened by %.3g mm", noise, allowance)
+    return _Classified(projector, cls, classified, field, noise, allowance, added, FieldScale.of(cls, classified))
+
+
+class _Gridder:
+    """The grids of a morph's faces (:func:`~hot2cold.pipeline.checks.face_grids`), for the refinement, G1 and
+    the checks: the faces' nodes and estimates kept across the rounds (:class:`FaceNodes`), and the FE model's
+    own field between its nodes where it brings its elements and they were taken."""
+
+    def __init__(self, context: MorphContext, classified: _Classified):
+        self.context, self.classified = context, classified
+        fe, cls = classified.fe_field, classified.classification
+        self.elements = (ElementField(fe.points, fe.triangles, fe.displacements, cls.node_distance,
+                                      classified.scale.strain) if classified.element_points else None)
+        self.face_nodes = FaceNodes(cls, classified.field, context.settings.vertex_neighbours)
+
+    def __call__(self, part: Part, faces: list[int], slack: bool = True) -> list[FaceGrid]:
+        """The grids of ``faces`` of ``part`` (the hot one or a refined one), their slack left out where not
+        ``slack``."""
+        settings, classified = self.context.settings, self.classified
+        return face_grids(part, classified.projector, classified.classification, classified.field,
+                          self.context.estimator, settings.vertex_neighbours, faces, self.elements,
+                          self.face_nodes, settings.threads, with_slack=slack)
+
+
+@dataclass(frozen=True, eq=False)
+class _Refined:
+    """The fits after the refinement to the tolerance (as they were where it does not run).
+
+    Attributes
+    ----------
+    context : MorphContext on the refined hot part (same shape, same parameters).
+    faces, edges : the fits.
+    grids : one FaceGrid per face, on its final knots.
+    face_refinements, edge_refinements : what the refinement did, for the report.
+    shortest : (n_faces,) float array, the refinement's shortest half span per face (mm), or None when it did
+        not run: G1 refines no finer.
+    """
+
+    context: MorphContext
+    faces: list[FaceMorph]
+    edges: list[EdgeMorph]
+    grids: list[FaceGrid]
+    face_refinements: tuple = ()
+    edge_refinements: tuple = ()
+    shortest: np.ndarray | None = None
+
+
+def _refine(context: MorphContext, classified: _Classified, faces: list[FaceMorph], edges: list[EdgeMorph],
+            regrid: _Gridder) -> _Refined:
+    """Refine the fits to the tolerance (beyond the paper; not with ``keep_knots``): knots and cubic degree
+    where the error at the nodes or between them misses it (:func:`~hot2cold.pipeline.refine.refine`); then
+    the grids of every face on its final knots (a face refined without them never needed one before)."""
+    settings, cls, field = context.settings, classified.classification, classified.field
+    made: dict[int, FaceGrid] = {}      # grids of the faces the refinement measures on them, then of every face
+    refined = None
+    if settings.tolerance is not None and not settings.keep_knots:
+        measured = Targets.measured_faces(context.part, cls)
+        made.update(zip(measured, regrid(context.part, measured)))
+        targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + classified.allowance, made,
+                             edge_grids(context.part, cls, field, context.estimator), classified.element_points > 0)
+        refined = refine(context.part, cls, field, faces, edges, targets, settings.max_refinements,
+                         context.fit_face, context.refit_edges, regrid, settings.threads)
+        context = context.with_part(refined.part)
+        made.update(refined.grids)
+        faces, edges = refined.faces, refined.edges
+        spans = targets.min_span_spacings           # in node spacings (0: nothing refined)
+        shortest = spans * targets.face_spacing if spans else None
+    missing = [k for k in range(len(context.part.faces)) if k not in made]
+    made.update(zip(missing, regrid(context.part, missing) if missing else []))
+    grids = [made[k] for k in range(len(context.part.faces))]
+    if refined is None:
+        return _Refined(context, faces, edges, grids)
+    return _Refined(context, faces, edges, grids, tuple(refined.face_refinements),
+                    tuple(refined.edge_refinements), shortest)
+
+
+@dataclass(frozen=True, eq=False)
+class _Cold:
+    """The cold part rebuilt, sewn and checked.
+
+    Attributes
+    ----------
+    kernel : ColdKernel, the cold geometry in a copy of the hot part's kernel shape.
+    vertices : (nv, 3) float array, the cold vertices.
+    gaps : the tolerances fitted to its gaps (:func:`~hot2cold.kernel.tolerances.fit_tolerances`).
+    hot_checks, solid_checks : one SolidCheck per hot and per cold solid, a cold one invalid where the checks
+        after the sew found a problem.
+    check : what :func:`~hot2cold.pipeline.checks.check_cold` found.
+    farthest_node : (n_faces,) float array, per face the farthest point of its grid from the nodes (mm).
+    """
+
+    kernel: ColdKernel
+    vertices: np.ndarray
+    gaps: object
+    hot_checks: list
+    solid_checks: list
+    check: object
+    farthest_node: np.ndarray
+
+    def checks(self) -> Checks:
+        """The checks of the hot and the cold part, for the report."""
+        return Checks(self.hot_checks, self.solid_checks, self.gaps, self.check.between, self.check.unmeasured,
+                      self.farthest_node)
+
+
+def _rebuild_and_check(context: MorphContext, fits: Fits, classified: _Classified, hot_checks: list,
+                       grids: list[FaceGrid], stages: _Stages) -> _Cold:
+    """Rebuild the cold part (the cold geometry in a copy of the kernel shape), sew it (tolerances fitted to its
+    gaps) and check it (:func:`~hot2cold.pipeline.checks.check_cold`)."""
+    part, settings = context.part, context.settings
+    vertices = part.vertices + context.vertex_displacements
+    stages.begin("rebuild")
+    cold = rebuild(part.kernel, [f.surface for f in fits.faces], [e.curve for e in fits.edges], vertices)
+    stages.lap("rebuild")
+    stages.begin("sew")
+    gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal,
+                          touch_bound=_TOUCH_SHARE * part.diagonal)
+    cold_checks = check_solids(cold.shape)
+    stages.lap("sew")
+    stages.begin("check")
+    tolerance = (settings.tolerance if settings.tolerance is not None else np.inf) + classified.allowance
+    check = check_cold(part, cold, fits.faces, classified.projector, hot_checks, cold_checks, classified.scale,
+                       grids, tolerance)
+    cold_checks = [replace(c, valid=False) if s in check.problems else c for s, c in enumerate(cold_checks)]
+    stages.lap("check")
+    return _Cold(cold, vertices, gaps, hot_checks, cold_checks, check, np.array([g.farthest_node for g in grids]))
+
+
+def _smooth_edges(context: MorphContext, refined: _Refined, corners: list[CornerReport], regrid: _Gridder,
+                  stages: _Stages) -> tuple[MorphContext, list[FaceGrid], Fits]:
+    """G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges; faces
+    refined along the edges their nets cannot bring to 0.01 deg (beyond the paper; with the refinement, no
+    finer than it went); then G2 (the paper's outlook): the curvature jumps across them measured, and removed
+    if asked.  Returns the context (on the part G1 refined, if it did), the grids and the fits."""
+    grids, face_morphs, edge_morphs, g1_reports = refined.grids, refined.faces, refined.edges, ()
+    if context.tangent:
+        stages.begin("g1", len(context.tangent))
+        context, grids, edge_morphs, face_morphs, g1_reports = _g1(context, edge_morphs, face_morphs, corners,
+                                                                   grids, refined.shortest, regrid)
+        # the checks between the nodes need the slack the grids of a refinement G1 took were made without
+        grids = with_slack(context.part, grids, regrid.face_nodes, context.settings.threads)
+        stages.lap("g1")
+        stages.begin("g2")
+        face_morphs, g1_reports = context.correct_g2(face_morphs, g1_reports, grids, edge_morphs)
+        stages.lap("g2")
+    return context, grids, Fits(face_morphs, edge_morphs, refined.face_refinements, refined.edge_refinements,
+                                tuple(g1_reports))
+
+
+def _result(context: MorphContext, classified: _Classified, fits: Fits, cold: _Cold, stages: _Stages,
+            about: dict) -> MorphResult:
+    """The report (step 8, eq. 21-22: each node's cold target projected onto the morphed geometry) and the
+    result; ``about`` holds :func:`~hot2cold.pipeline.report.build_report`'s words on the run (hot_name,
+    inversion)."""
+    part, cls, field, settings = context.part, classified.classification, classified.field, context.settings
+    stages.begin("report", len(cls.used))
+    errors = node_errors(part, cls, field, cold.vertices, Projector(cold.kernel.faces, cold.kernel.edges),
+                         [f.surface for f in fits.faces], [e.curve for e in fits.edges], settings.threads)
+    stages.lap("report")
+    report = build_report(context, fits, cold.checks(), errors, timings=stages.timings, scatter=classified.noise,
+                          allowance=classified.allowance, element_points=classified.element_points, **about)
+    if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
+        log.info("not measured: %s", report.unsupported_text())
+    problems = cold.check.problems
+    log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
+    return MorphResult(report=report, part=part, classification=cls, faces=list(fits.faces),
+                       edges=list(fits.edges), field=field, node_errors=errors, cold_kernel=cold.kernel,
+                       problems=tuple(f"cold solid {s} {text}" for s in sorted(problems) for text in problems[s]))
+
+
 def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress: Progress | None) -> MorphResult:
-    """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords."""
+    """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords.
+    The steps of METHOD in order, each a function of its own; the stages timed and told to ``progress``."""
     stages = _Stages(progress)
     field = as_field(field, **reading)     # no start marker: a field refused says so alone
     stages.lap("read")
@@ -759,26 +973,13 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
 
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     stages.begin("classify", len(field))
-    projector = Projector(part.kernel.faces, part.kernel.edges)
-    starts = Starts(part)
-    cls, classified, noise = _classified(part, field, settings, projector, starts, inverted=invert)
-    element_points_added = 0
-    if noise <= NOISY_SHARE * (settings.tolerance or np.inf):      # a smooth field: taken inside its elements
-        dense, element_points_added = element_points(field, settings)
-        if element_points_added:
-            # its nodes covered the part (checked, warned once); the points inside the elements add to them
-            cls, classified, noise = _classified(part, dense, settings, projector, starts, check=False)
-    fe_field, field = field, classified
-    scale = FieldScale.of(cls, field)
-    allowance = noise_allowance(noise, int(cls.used.sum()))
-    if noise > NOISY_SHARE * (settings.tolerance or np.inf):
-        log.info("the field scatters by %.3g mm about a smooth field (per component): the fits are smoothed "
-                 "and the tolerance at the nodes is widened by %.3g mm", noise, allowance)
+    classified = _classify(part, field, settings, invert)
+    cls, field = classified.classification, classified.field
     stages.lap("classify")
 
     # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
-    context = MorphContext.of(part, cls, field, settings, projector, scale.strain,
-                              smoothing_noise(noise, settings))
+    context = MorphContext.of(part, cls, field, settings, classified.projector, classified.scale.strain,
+                              smoothing_noise(classified.noise, settings))
     stages.begin("edges", len(part.edges))
     edge_morphs, corners = context.fit_edges()
     stages.lap("edges")
@@ -788,95 +989,19 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.count("faces", done, total))
     stages.lap("faces")
 
-    # refinement to the tolerance (beyond the paper; not with keep_knots): knots and cubic degree where the
-    # error at the nodes or between them misses it; from here on the context's part is the refined hot part
-    # (same shape, same parameters), and the refined faces have grids of their own
-    # the FE model's own field between its nodes, where it brings its elements and they were taken
-    elements = (ElementField(fe_field.points, fe_field.triangles, fe_field.displacements, cls.node_distance,
-                             scale.strain) if element_points_added else None)
-    face_nodes = FaceNodes(cls, field, settings.vertex_neighbours)      # kept for every round's grids
-    estimator = context.estimator
-
-    def regrid(part: Part, faces: list[int], slack: bool = True) -> list[FaceGrid]:
-        """The grids of ``faces`` of ``part`` (the hot one or a refined one: the refinement's and G1's), their
-        slack left out where not ``slack`` (:func:`~hot2cold.pipeline.checks.face_grids`)."""
-        return face_grids(part, projector, cls, field, estimator, settings.vertex_neighbours, faces, elements,
-                          face_nodes, settings.threads, with_slack=slack)
-
-    refinements, edge_refinements = (), ()
-    refined_spans = 0.0        # the refinement's shortest half span, in node spacings (0: no refinement)
-    made: dict[int, FaceGrid] = {}      # grids of the faces the refinement measures on them, then of every face
+    # refinement to the tolerance (beyond the paper): from here on the context's part is the refined hot part
+    regrid = _Gridder(context, classified)
     refining = settings.tolerance is not None and not settings.keep_knots
     if refining:
         stages.begin("refine")
-        measured = Targets.measured_faces(context.part, cls)
-        made.update(zip(measured, regrid(context.part, measured)))
-        targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + allowance, made,
-                             edge_grids(context.part, cls, field, context.estimator), element_points_added > 0)
-        refined = refine(context.part, cls, field, face_morphs, edge_morphs, targets, settings.max_refinements,
-                         context.fit_face, context.refit_edges, regrid, settings.threads)
-        context = context.with_part(refined.part)
-        made.update(refined.grids)
-        face_morphs, edge_morphs = refined.faces, refined.edges
-        refinements, edge_refinements = refined.face_refinements, refined.edge_refinements
-        refined_spans = targets.min_span_spacings
-    # the other faces' grids once, on their final knots (a face refined without them never needed one before)
-    missing = [k for k in range(len(context.part.faces)) if k not in made]
-    made.update(zip(missing, regrid(context.part, missing) if missing else []))
-    grids = [made[k] for k in range(len(context.part.faces))]
+    refined = _refine(context, classified, face_morphs, edge_morphs, regrid)
     if refining:
         stages.lap("refine")
+    context = refined.context
 
-    # G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges; faces
-    # refined along the edges their nets cannot bring to 0.01 deg (beyond the paper; with the refinement)
-    g1_reports = ()
-    if context.tangent:
-        stages.begin("g1", len(context.tangent))
-        shortest = refined_spans * targets.face_spacing if refined_spans else None
-        context, grids, edge_morphs, face_morphs, g1_reports = _g1(context, edge_morphs, face_morphs, corners,
-                                                                   grids, shortest, regrid)
-        # the checks between the nodes need the slack the grids of a refinement G1 took were made without
-        grids = with_slack(context.part, grids, face_nodes, settings.threads)
-        stages.lap("g1")
-        # G2 (the paper's outlook): the curvature jumps across them measured, and removed if asked
-        stages.begin("g2")
-        face_morphs, g1_reports = context.correct_g2(face_morphs, g1_reports, grids, edge_morphs)
-        stages.lap("g2")
-    fits = Fits(face_morphs, edge_morphs, tuple(refinements), tuple(edge_refinements), tuple(g1_reports))
-
-    # rebuild, sew and check: the cold geometry in a copy of the kernel shape, tolerances fitted to its gaps
-    part = context.part
-    cold_vertices = part.vertices + context.vertex_displacements
-    stages.begin("rebuild")
-    cold = rebuild(part.kernel, [f.surface for f in face_morphs], [e.curve for e in edge_morphs], cold_vertices)
-    stages.lap("rebuild")
-    stages.begin("sew")
-    gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal,
-                          touch_bound=_TOUCH_SHARE * part.diagonal)
-    cold_checks = check_solids(cold.shape)
-    stages.lap("sew")
-    stages.begin("check")
-    cold_check = check_cold(part, cold, face_morphs, projector, hot_checks, cold_checks, scale, grids,
-                            (settings.tolerance if settings.tolerance is not None else np.inf) + allowance)
-    problems = cold_check.problems
-    cold_checks = [replace(c, valid=False) if s in problems else c for s, c in enumerate(cold_checks)]
-    stages.lap("check")
-
-    # report (step 8, eq. 21-22): each node's cold target projected onto the morphed geometry
-    stages.begin("report", len(cls.used))
-    errors = node_errors(part, cls, field, cold_vertices, Projector(cold.faces, cold.edges),
-                         [f.surface for f in face_morphs], [e.curve for e in edge_morphs], settings.threads)
-    stages.lap("report")
-    report = build_report(context, fits, Checks(hot_checks, cold_checks, gaps, cold_check.between,
-                                                cold_check.unmeasured,
-                                                np.array([g.farthest_node for g in grids])), errors,
-                          hot_name=str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-                          timings=stages.timings, inversion=None if inversion is None else asdict(inversion),
-                          scatter=noise, allowance=allowance, element_points=element_points_added)
-    if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
-        log.info("not measured: %s", report.unsupported_text())
-    result = MorphResult(report=report, part=part, classification=cls, faces=face_morphs, edges=edge_morphs,
-                         field=field, node_errors=errors, cold_kernel=cold,
-                         problems=tuple(f"cold solid {s} {text}" for s in sorted(problems) for text in problems[s]))
-    log.info("morph: Δmax %.3g mm, Δmean %.3g mm, valid %s", report.delta_max, report.delta_mean, report.valid)
-    return result
+    # G1 and G2 along the tangent edges, then rebuild, sew and check, then the report
+    context, grids, fits = _smooth_edges(context, refined, corners, regrid, stages)
+    cold = _rebuild_and_check(context, fits, classified, hot_checks, grids, stages)
+    about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
+             "inversion": None if inversion is None else asdict(inversion)}
+    return _result(context, classified, fits, cold, stages, about)
