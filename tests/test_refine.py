@@ -598,7 +598,7 @@ def test_refine_patches_halves_the_patches_at_the_points_in_their_classes():
     stays shared pole for pole; the hot shape is kept; a face that may not be halved further gives None."""
     from hot2cold.pipeline.face_fit import FaceMorph
     from hot2cold.pipeline.edge_fit import EdgeMorph
-    from hot2cold.pipeline.refine import refine_patches
+    from hot2cold.pipeline.refine import Refitter, refine_patches
     from test_g1 import _part, _patches
 
     sa, sb = _patches()
@@ -621,7 +621,8 @@ def test_refine_patches_halves_the_patches_at_the_points_in_their_classes():
         return [f"grid {k}" for k in ks]
 
     points = {1: np.array([[0.1, 0.2], [0.1, 0.3]])}      # both in face 1's patch u [0, 0.5] x v [0, 1/3]
-    out = refine_patches(part, faces, edges, points, np.zeros(2), fit_face, fit_edges, regrid)
+    refitter = Refitter(fit_face, fit_edges, regrid)
+    out = refine_patches(part, (faces, edges), points, np.zeros(2), refitter)
     b = out.part.faces[1].surface
     assert out.knots_added[1] == (1, 1)
     assert np.allclose(b.u_knots, [0, 0, 0, 0, 0.25, 0.5, 1, 1, 1, 1])
@@ -637,7 +638,7 @@ def test_refine_patches_halves_the_patches_at_the_points_in_their_classes():
     assert calls == {"faces": [0, 1], "edges": [{0}], "grids": [[0, 1]]}
     assert out.grids == {0: "grid 0", 1: "grid 1"}
     # halves shorter than the shortest span allowed: nothing to do
-    assert refine_patches(part, faces, edges, points, np.full(2, 1e3), fit_face, fit_edges, regrid) is None
+    assert refine_patches(part, (faces, edges), points, np.full(2, 1e3), refitter) is None
 
 
 @pytest.mark.heavy

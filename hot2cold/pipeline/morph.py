@@ -50,7 +50,8 @@ from ..core.domain import Trim
 from ..core.localfit import scatter
 from ..core.model import Classification, Face, Part, Role
 from ..core.threads import map_threads
-from .refine import TARGET_SHARE, Regrid, Targets, edge_errors, noise_allowance, refine, refine_patches
+from .refine import (TARGET_SHARE, Refitter, Regrid, Targets, edge_errors, noise_allowance, refine,
+                     refine_patches)
 from .report import Checks, Fits, build_report, node_errors
 from .result import MorphResult, check_result
 from ..settings import Continuity, Settings
@@ -675,9 +676,10 @@ def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[F
                              _KINK_PROMISE_DEG)
         if not misses:
             break
-        patch = refine_patches(ctx.part, face_morphs, edge_morphs, misses, shortest, ctx.fit_face,
-                               ctx.refit_edges, lambda part, faces: regrid(part, faces, slack=False),
-                               ctx.settings.threads, ctx.classification.counts(Role.FACE, len(ctx.part.faces)))
+        refitter = Refitter(ctx.fit_face, ctx.refit_edges, lambda part, faces: regrid(part, faces, slack=False),
+                            ctx.settings.threads)
+        patch = refine_patches(ctx.part, (face_morphs, edge_morphs), misses, shortest, refitter,
+                               ctx.classification.counts(Role.FACE, len(ctx.part.faces)))
         if patch is None:
             log.info("G1: %d edges above %g deg; no patch of their faces may be halved", len(over),
                      _KINK_PROMISE_DEG)
@@ -842,8 +844,8 @@ def _refine(context: MorphContext, classified: _Classified, faces: list[FaceMorp
         made.update(zip(measured, regrid(context.part, measured)))
         targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + classified.allowance, made,
                              edge_grids(context.part, cls, field, context.estimator), classified.element_points > 0)
-        refined = refine(context.part, cls, field, faces, edges, targets, settings.max_refinements,
-                         context.fit_face, context.refit_edges, regrid, settings.threads)
+        refitter = Refitter(context.fit_face, context.refit_edges, regrid, settings.threads, settings.max_refinements)
+        refined = refine(context.part, cls, field, (faces, edges), targets, refitter)
         context = context.with_part(refined.part)
         made.update(refined.grids)
         faces, edges = refined.faces, refined.edges

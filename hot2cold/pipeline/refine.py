@@ -545,6 +545,43 @@ FitEdges = Callable[[Part, list[EdgeMorph], set[int]], list[EdgeMorph]]
 Regrid = Callable[[Part, list[int]], list[FaceGrid]]
 
 
+@dataclass(frozen=True, eq=False)
+class Refitter:
+    """How a refined part is fitted again, for :func:`refine` and :func:`refine_patches`.
+
+    ``fit_face(part, face, edge_morphs) -> FaceMorph`` fits a face of a (refined) part against the given edge
+    morphs; ``fit_edges(part, edge_morphs, refined) -> edge_morphs`` fits the edges in the set ``refined``
+    again and returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose
+    curve object changes counts as changed); ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of
+    each of the (refined) ``faces`` of ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`); the faces of a
+    round are fitted in up to ``threads`` threads; :func:`refine` runs ``max_rounds`` rounds at the most.
+    """
+
+    fit_face: FitFace
+    fit_edges: FitEdges
+    regrid: Regrid
+    threads: int = 1
+    max_rounds: int = 1
+
+    def refit(self, inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph],
+              gridded: set[int] | None = None, nodes: np.ndarray | None = None) -> _Refitted:
+        """The refined edges fitted again, then the refined faces and every face on an edge that moved (for
+        faces of ``nodes`` ``(n_faces,)`` nodes: the cost of each in the threads); the grids of the refined
+        faces (of those in ``gridded`` only, where given)."""
+        part = inserted.part
+        changed = sorted(inserted.faces if gridded is None else inserted.faces & gridded)
+        grids = dict(zip(changed, self.regrid(part, changed))) if changed else {}
+        fitted = self.fit_edges(part, edge_morphs, inserted.edges)
+        moved = inserted.edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
+        refit = set(inserted.faces) | {k for k, f in enumerate(part.faces) for use in f.uses if use.edge in moved}
+        faces = list(face_morphs)
+        order = sorted(refit)
+        for k, morph in zip(order, map_threads(lambda k: self.fit_face(part, part.faces[k], fitted), order,
+                                               self.threads, cost=None if nodes is None else nodes[order])):
+            faces[k] = morph
+        return _Refitted(faces, list(fitted), grids, refit, moved)
+
+
 def _mark(part: Part, classes: _Classes, k: int, wanted: list[tuple[np.ndarray, bool]], marks: dict,
           elevate: set) -> bool:
     """Face ``k``'s ``wanted`` refinement (:func:`_face_marks`) added to ``marks`` (class root -> list of
@@ -621,165 +658,186 @@ class _Refitted:
     moved: set[int]
 
 
-def _refit(inserted: _Inserted, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph], fit_face: FitFace,
-           fit_edges: FitEdges, regrid: Regrid, gridded: set[int] | None = None, threads: int = 1,
-           nodes: np.ndarray | None = None) -> _Refitted:
-    """The refined edges fitted again, then the refined faces and every face on an edge that moved (in up to
-    ``threads`` threads, for faces of ``nodes`` ``(n_faces,)`` nodes); the grids of the refined faces (of
-    those in ``gridded`` only, where given)."""
-    part = inserted.part
-    changed = sorted(inserted.faces if gridded is None else inserted.faces & gridded)
-    grids = dict(zip(changed, regrid(part, changed))) if changed else {}
-    fitted = fit_edges(part, edge_morphs, inserted.edges)
-    moved = inserted.edges | {e for e, (a, b) in enumerate(zip(edge_morphs, fitted)) if a.curve is not b.curve}
-    refit = set(inserted.faces) | {k for k, f in enumerate(part.faces) for use in f.uses if use.edge in moved}
-    faces = list(face_morphs)
-    order = sorted(refit)
-    for k, morph in zip(order, map_threads(lambda k: fit_face(part, part.faces[k], fitted), order, threads,
-                                           cost=None if nodes is None else nodes[order])):
-        faces[k] = morph
-    return _Refitted(faces, list(fitted), grids, refit, moved)
-
-
 # ----------------------------------------------------------------------------------------------------------
 # The refinement loop.
 # ----------------------------------------------------------------------------------------------------------
 
-def refine(part: Part, cls: Classification, field: DisplacementField, face_morphs: list[FaceMorph],
-           edge_morphs: list[EdgeMorph], targets: Targets, max_rounds: int, fit_face: FitFace,
-           fit_edges: FitEdges, regrid: Regrid, threads: int = 1) -> RefineResult:
-    """Refine faces and edges until every error is within ``targets.limit`` mm or ``max_rounds`` are done.
-
-    ``fit_face(part, face, edge_morphs) -> FaceMorph`` fits a face of a (refined) part against the given edge
-    morphs;
-    ``fit_edges(part, edge_morphs, refined) -> edge_morphs`` fits the edges in the set ``refined`` again and
-    returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose curve
-    object changes counts as changed);
-    ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of each of the (refined) ``faces`` of
-    ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`; asked for the faces measured on their grids
-    only); ``threads``: the faces of a round are fitted in up to that many threads.  Returns the refined part
-    (hot geometry, same shape), the final morphs and one record per face and edge that was refined or missed.
-    """
-    limit = targets.limit
-    face_morphs, edge_morphs = list(face_morphs), list(edge_morphs)
-    hot_faces, hot_edges = list(part.faces), list(part.edges)
-    face_added = np.zeros((len(part.faces), 2), int)
-    edge_added = np.zeros(len(part.edges), int)
-    face_rounds = np.zeros(len(part.faces), int)
-    edge_rounds = np.zeros(len(part.edges), int)
-    grids: dict[int, FaceGrid] = {}
-
-    sizes = cls.counts(Role.FACE, len(part.faces))             # each face's nodes: its work's cost, for threads
-
-    def face_errors(k: int) -> FaceErrors:
-        return _face_errors(part.faces[k], face_morphs[k], cls, field, targets.grids[k], edge_morphs, part.edges,
-                            limit)
-
-    def errors():
-        return (map_threads(face_errors, range(len(part.faces)), threads, cost=sizes),
-                [_edge_errors(e, m, cls, field, g) for e, m, g in zip(part.edges, edge_morphs, targets.edge_grids)])
-
-    def worst(err):
-        return float(err.max()) if len(err) else 0.0
-
-    face_err, edge_err = errors()
-    face_before = [(e.nodes, e.between) for e in face_err]
-    edge_before = [(e.nodes, e.between) for e in edge_err]
-    stuck_faces: set[int] = set()                # faces and edges that miss where no span may be halved
-    stuck_edges: set[int] = set()
-    measured = set(np.flatnonzero(targets.between).tolist())     # faces measured on their grids
-    chased = [np.full(len(cls.nodes_of(Role.FACE, f.index)), np.nan) for f in part.faces]   # error when marked
-    stalled = [np.zeros(len(c), bool) for c in chased]    # nodes a finer net did not bring closer
-    rounds = 0
-    while rounds < max_rounds:
-        bad_faces = [k for k, e in enumerate(face_err) if worst(e.error) > limit]
-        bad_edges = [k for k, e in enumerate(edge_err) if worst(e.error) > limit]
-        if not bad_faces and not bad_edges:
-            stuck_faces, stuck_edges = set(), set()
+def refine(part: Part, cls: Classification, field: DisplacementField,
+           morphs: tuple[list[FaceMorph], list[EdgeMorph]], targets: Targets, refitter: Refitter) -> RefineResult:
+    """Refine faces and edges until every error is within ``targets.limit`` mm or ``refitter.max_rounds`` are
+    done; ``morphs`` are the fits of the faces and edges of ``part`` to the nodes ``cls`` of ``field``.  The
+    faces measured on their grids (``targets.between``) are gridded again after each round, the others are the
+    caller's to grid once their knots are final.  Returns the refined part (hot geometry, same shape), the final
+    morphs and one record per face and edge that was refined or missed."""
+    loop = _Refining(part, cls, field, morphs, targets, refitter)
+    while loop.rounds < refitter.max_rounds and loop.missing():
+        if not loop.round():
             break
-        classes = _classes(part, face_morphs)
+    return loop.result()
+
+
+class _Refining:
+    """The state of one refinement (:func:`refine`): the part and its fits as refined so far, their errors,
+    what was added to each face and edge, and the nodes chased and given up."""
+
+    def __init__(self, part: Part, cls: Classification, field: DisplacementField,
+                 morphs: tuple[list[FaceMorph], list[EdgeMorph]], targets: Targets, refitter: Refitter):
+        self.part, self.cls, self.field, self.targets, self.refitter = part, cls, field, targets, refitter
+        self.faces, self.edges = list(morphs[0]), list(morphs[1])
+        self.hot_faces, self.hot_edges = list(part.faces), list(part.edges)
+        self.face_added = np.zeros((len(part.faces), 2), int)
+        self.edge_added = np.zeros(len(part.edges), int)
+        self.face_rounds = np.zeros(len(part.faces), int)
+        self.edge_rounds = np.zeros(len(part.edges), int)
+        self.grids: dict[int, FaceGrid] = {}
+        self.sizes = cls.counts(Role.FACE, len(part.faces))        # each face's nodes: its work's cost in threads
+        self.face_err = map_threads(self._face_errors, range(len(part.faces)), refitter.threads, cost=self.sizes)
+        self.edge_err = [self._edge_errors(e) for e in range(len(part.edges))]
+        self.face_before = [(e.nodes, e.between) for e in self.face_err]
+        self.edge_before = [(e.nodes, e.between) for e in self.edge_err]
+        self.stuck_faces: set[int] = set()         # faces and edges that miss where no span may be halved
+        self.stuck_edges: set[int] = set()
+        self.measured = set(np.flatnonzero(targets.between).tolist())       # faces measured on their grids
+        self.chased = [np.full(len(cls.nodes_of(Role.FACE, f.index)), np.nan) for f in part.faces]
+        self.stalled = [np.zeros(len(c), bool) for c in self.chased]   # nodes a finer net did not bring closer
+        self.rounds = 0
+
+    def _face_errors(self, k: int) -> FaceErrors:
+        return _face_errors(self.part.faces[k], self.faces[k], self.cls, self.field, self.targets.grids[k],
+                            self.edges, self.part.edges, self.targets.limit)
+
+    def _edge_errors(self, e: int) -> EdgeErrors:
+        return _edge_errors(self.part.edges[e], self.edges[e], self.cls, self.field, self.targets.edge_grids[e])
+
+    def _bad(self) -> tuple[list[int], list[int]]:
+        limit = self.targets.limit
+        return ([k for k, e in enumerate(self.face_err) if _worst(e.error) > limit],
+                [k for k, e in enumerate(self.edge_err) if _worst(e.error) > limit])
+
+    def missing(self) -> bool:
+        """Whether a face or an edge still misses the limit (if none does, none is stuck either)."""
+        bad_faces, bad_edges = self._bad()
+        if not bad_faces and not bad_edges:
+            self.stuck_faces, self.stuck_edges = set(), set()
+            return False
+        return True
+
+    def round(self) -> bool:
+        """One round: the spans that miss marked in their classes, halved (and raised to cubic), everything
+        they touch fitted again and measured again.  False when no span may be halved any more."""
+        bad_faces, bad_edges = self._bad()
+        classes = _classes(self.part, self.faces)
         marks: dict = {}                          # class root -> list of normalised knots to insert
         elevate: set = set()                      # class roots to raise to REFINED_DEGREE
-        unplaced_faces, unplaced_edges = set(), set()
-        for k in bad_faces:
-            err = face_err[k]
-            bad = err.error > limit
-            nodes = bad[:len(chased[k])]          # the face's nodes come first in its errors (a view of bad)
-            stalled[k] |= nodes & (err.error[:len(nodes)] > STALL_SHARE * chased[k])
-            nodes &= ~stalled[k]
-            wanted = _face_marks(part.faces[k].surface, err.uv, bad,
-                                 targets.min_span_spacings * targets.face_spacing[k])
-            if not _mark(part, classes, k, wanted, marks, elevate):
-                unplaced_faces.add(k)
-            else:
-                chased[k][nodes] = err.error[:len(nodes)][nodes]
-        for e in bad_edges:
-            t, err = edge_err[e].t, edge_err[e].error
-            mids, up = _edge_marks(part.edges[e].curve, t, err > limit,
-                                   targets.min_span_spacings * targets.edge_spacing[e])
-            if not len(mids) and not up:
-                unplaced_edges.add(e)
-            member = Member.edge(e)
-            knots, _ = _knots_degree(part, member)
-            root, flip = classes.find(member)
-            marks.setdefault(root, []).append(_to_class(mids, knots, flip))
-            if up:
-                elevate.add(root)
-        inserted = _insert(part, classes, marks, elevate)
-        stuck_faces, stuck_edges = unplaced_faces, unplaced_edges
+        self.stuck_faces = {k for k in bad_faces if not self._mark_face(k, classes, marks, elevate)}
+        self.stuck_edges = {e for e in bad_edges if not self._mark_edge(e, classes, marks, elevate)}
+        inserted = _insert(self.part, classes, marks, elevate)
         if not inserted.faces and not inserted.edges:
-            break
-        part = inserted.part
-        face_added += inserted.face_added
-        edge_added += inserted.edge_added
-        # only the faces measured on their grids need them each round (the caller grids the others once their
-        # knots are final)
-        refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, measured, threads, sizes)
-        grids.update(refitted.grids)
-        targets = targets.with_grids(refitted.grids)
-        face_morphs, edge_morphs = refitted.faces, refitted.edges
-        edge_rounds[list(inserted.edges)] += 1
-        face_rounds[list(inserted.faces)] += 1
-        refit, moved = refitted.refit, refitted.moved
-        rounds += 1
-        # the others' errors stand: a face's depend on it and its edges only
-        again = sorted(refit)
-        for k, err in zip(again, map_threads(face_errors, again, threads, cost=sizes[again])):
-            face_err[k] = err
-        for e in moved:
-            edge_err[e] = _edge_errors(part.edges[e], edge_morphs[e], cls, field, targets.edge_grids[e])
-        log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", rounds,
-                 len(inserted.faces), len(inserted.edges),
-                 max([worst(e.error) for e in face_err] + [worst(e.error) for e in edge_err] + [0.0]))
+            return False
+        self._take(inserted)
+        return True
 
-    face_reports = []
-    reported = [k for k in range(len(part.faces)) if max(face_before[k]) > limit or face_rounds[k]]
-    residual = dict(zip(reported, map_threads(
-        lambda k: worst(node_residuals(part.faces[k], face_morphs[k], cls, field)), reported, threads,
-        cost=sizes[reported])))
-    for k in reported:
-        face, hot = part.faces[k], hot_faces[k]
-        missed = max(face_before[k]) > limit
-        s0, s1 = hot.surface, face.surface
-        unresolved = int(np.count_nonzero(stalled[k] & (face_err[k].error[:len(stalled[k])] > limit)))
-        face_reports.append(Refinement(
-            k, missed, not ((k in stuck_faces or unresolved) and worst(face_err[k].error) > limit),
-            int(face_added[k, 0]), int(face_added[k, 1]),
-            f"{s0.u_degree}x{s0.v_degree}", f"{s1.u_degree}x{s1.v_degree}",
-            "x".join(map(str, s0.shape)), "x".join(map(str, s1.shape)), int(face_rounds[k]),
-            face_before[k][0], face_err[k].nodes, residual[k],
-            face_before[k][1], face_err[k].between, unresolved))
-    edge_reports = []
-    for e, (edge, hot) in enumerate(zip(part.edges, hot_edges)):
-        missed = max(edge_before[e]) > limit
-        if edge.degenerate or (not missed and not edge_rounds[e]):
-            continue
-        edge_reports.append(EdgeRefinement(
-            e, missed, not (e in stuck_edges and worst(edge_err[e].error) > limit),
-            int(edge_added[e]), hot.curve.degree, edge.curve.degree,
-            hot.curve.n_poles, edge.curve.n_poles, int(edge_rounds[e]), edge_before[e][0], edge_err[e].nodes,
-            edge_before[e][1], edge_err[e].between))
-    return RefineResult(part, face_morphs, edge_morphs, face_reports, edge_reports, rounds, grids)
+    def _mark_face(self, k: int, classes, marks: dict, elevate: set) -> bool:
+        """Mark the spans of face ``k`` that hold its misses, but for nodes a finer net did not bring closer
+        (:data:`STALL_SHARE`); False where none may be halved."""
+        err, targets = self.face_err[k], self.targets
+        bad = err.error > targets.limit
+        n = len(self.chased[k])                   # the face's nodes come first in its errors
+        self.stalled[k] |= bad[:n] & (err.error[:n] > STALL_SHARE * self.chased[k])
+        bad[:n] &= ~self.stalled[k]               # a stalled node is chased no more: no marks for it
+        wanted = _face_marks(self.part.faces[k].surface, err.uv, bad,
+                             targets.min_span_spacings * targets.face_spacing[k])
+        if not _mark(self.part, classes, k, wanted, marks, elevate):
+            return False
+        nodes = bad[:n]
+        self.chased[k][nodes] = err.error[:n][nodes]
+        return True
+
+    def _mark_edge(self, e: int, classes, marks: dict, elevate: set) -> bool:
+        """Mark the spans of edge ``e`` that hold its misses (or its degree to raise); False where none may be."""
+        t, err = self.edge_err[e].t, self.edge_err[e].error
+        mids, up = _edge_marks(self.part.edges[e].curve, t, err > self.targets.limit,
+                               self.targets.min_span_spacings * self.targets.edge_spacing[e])
+        member = Member.edge(e)
+        knots, _ = _knots_degree(self.part, member)
+        root, flip = classes.find(member)
+        marks.setdefault(root, []).append(_to_class(mids, knots, flip))
+        if up:
+            elevate.add(root)
+        return bool(len(mids) or up)
+
+    def _take(self, inserted: _Inserted) -> None:
+        """The refined part of ``inserted`` fitted again (only the faces measured on their grids need them each
+        round) and measured again where its fits changed: the others' errors stand, a face's depend on it and
+        its edges only."""
+        self.part = inserted.part
+        self.face_added += inserted.face_added
+        self.edge_added += inserted.edge_added
+        refitted = self.refitter.refit(inserted, self.faces, self.edges, self.measured, self.sizes)
+        self.grids.update(refitted.grids)
+        self.targets = self.targets.with_grids(refitted.grids)
+        self.faces, self.edges = refitted.faces, refitted.edges
+        self.edge_rounds[list(inserted.edges)] += 1
+        self.face_rounds[list(inserted.faces)] += 1
+        self.rounds += 1
+        again = sorted(refitted.refit)
+        for k, err in zip(again, map_threads(self._face_errors, again, self.refitter.threads,
+                                             cost=self.sizes[again])):
+            self.face_err[k] = err
+        for e in refitted.moved:
+            self.edge_err[e] = self._edge_errors(e)
+        log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", self.rounds,
+                 len(inserted.faces), len(inserted.edges),
+                 max([_worst(e.error) for e in self.face_err] + [_worst(e.error) for e in self.edge_err] + [0.0]))
+
+    def result(self) -> RefineResult:
+        return RefineResult(self.part, self.faces, self.edges, self._face_reports(), self._edge_reports(),
+                            self.rounds, self.grids)
+
+    def _face_reports(self) -> list[Refinement]:
+        """A record per face that missed the limit or was refined."""
+        part, limit = self.part, self.targets.limit
+        reported = [k for k in range(len(part.faces)) if max(self.face_before[k]) > limit or self.face_rounds[k]]
+        residual = dict(zip(reported, map_threads(
+            lambda k: _worst(node_residuals(part.faces[k], self.faces[k], self.cls, self.field)), reported,
+            self.refitter.threads, cost=self.sizes[reported])))
+        out = []
+        for k in reported:
+            s0, s1 = self.hot_faces[k].surface, part.faces[k].surface
+            err = self.face_err[k]
+            unresolved = int(np.count_nonzero(self.stalled[k] & (err.error[:len(self.stalled[k])] > limit)))
+            out.append(Refinement(
+                face=k, missed=max(self.face_before[k]) > limit,
+                refinable=not ((k in self.stuck_faces or unresolved) and _worst(err.error) > limit),
+                knots_added_u=int(self.face_added[k, 0]), knots_added_v=int(self.face_added[k, 1]),
+                degree_before=f"{s0.u_degree}x{s0.v_degree}", degree_after=f"{s1.u_degree}x{s1.v_degree}",
+                net_before="x".join(map(str, s0.shape)), net_after="x".join(map(str, s1.shape)),
+                rounds=int(self.face_rounds[k]), delta_max_before=self.face_before[k][0],
+                delta_max_after=err.nodes, residual=residual[k], between_before=self.face_before[k][1],
+                between_after=err.between, unresolved=unresolved))
+        return out
+
+    def _edge_reports(self) -> list[EdgeRefinement]:
+        """A record per edge (not degenerate) that missed the limit or was refined."""
+        limit = self.targets.limit
+        out = []
+        for e, (edge, hot) in enumerate(zip(self.part.edges, self.hot_edges)):
+            missed = max(self.edge_before[e]) > limit
+            if edge.degenerate or (not missed and not self.edge_rounds[e]):
+                continue
+            err = self.edge_err[e]
+            out.append(EdgeRefinement(
+                edge=e, missed=missed, refinable=not (e in self.stuck_edges and _worst(err.error) > limit),
+                knots_added=int(self.edge_added[e]), degree_before=hot.curve.degree,
+                degree_after=edge.curve.degree, poles_before=hot.curve.n_poles, poles_after=edge.curve.n_poles,
+                rounds=int(self.edge_rounds[e]), delta_max_before=self.edge_before[e][0],
+                delta_max_after=err.nodes, between_before=self.edge_before[e][1], between_after=err.between))
+        return out
+
+
+def _worst(err: np.ndarray) -> float:
+    """The largest of ``err`` (0 when empty)."""
+    return float(err.max()) if len(err) else 0.0
 
 
 @dataclass(eq=False)
@@ -794,15 +852,16 @@ class PatchRefinement:
     knots_added: dict[int, tuple[int, int]]
 
 
-def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[EdgeMorph],
-                   points: dict[int, np.ndarray], shortest: np.ndarray, fit_face: FitFace, fit_edges: FitEdges,
-                   regrid: Regrid, threads: int = 1, nodes: np.ndarray | None = None) -> PatchRefinement | None:
+def refine_patches(part: Part, morphs: tuple[list[FaceMorph], list[EdgeMorph]], points: dict[int, np.ndarray],
+                   shortest: np.ndarray, refitter: Refitter, nodes: np.ndarray | None = None
+                   ) -> PatchRefinement | None:
     """The knot-span patches of each face ``k`` that hold one of ``points[k]`` ((m, 2) parameters) halved as
     :func:`refine` halves a patch that misses the tolerance (longest-edge bisection, halves at least
     ``shortest[k]`` mm long, a direction below :data:`REFINED_DEGREE` raised to it), in their parameter
-    classes so that shared edges stay shared, and the morphs fitted again (``fit_face``, ``fit_edges``,
-    ``regrid``, ``threads`` as for :func:`refine`; ``nodes`` ``(n_faces,)``, each face's nodes, the cost of its
-    refit).  None where no such patch may be halved."""
+    classes so that shared edges stay shared, and the morphs (of the faces and edges) fitted again by
+    ``refitter`` (``nodes`` ``(n_faces,)``, each face's nodes, the cost of its refit).  None where no such patch
+    may be halved."""
+    face_morphs, edge_morphs = morphs
     classes = _classes(part, face_morphs)
     marks: dict = {}
     elevate: set = set()
@@ -813,6 +872,6 @@ def refine_patches(part: Part, face_morphs: list[FaceMorph], edge_morphs: list[E
     inserted = _insert(part, classes, marks, elevate)
     if not inserted.faces and not inserted.edges:
         return None
-    refitted = _refit(inserted, face_morphs, edge_morphs, fit_face, fit_edges, regrid, threads=threads, nodes=nodes)
+    refitted = refitter.refit(inserted, face_morphs, edge_morphs, nodes=nodes)
     return PatchRefinement(inserted.part, refitted.faces, refitted.edges, refitted.grids,
                            {k: tuple(int(n) for n in inserted.face_added[k]) for k in sorted(inserted.faces)})
