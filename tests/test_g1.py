@@ -580,7 +580,7 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
 
     from hot2cold.core.lstsq import ReducedRows
     from hot2cold.kernel.project import Projector
-    from hot2cold.pipeline.face_fit import morph_face
+    from hot2cold.pipeline.face_fit import FitInputs, morph_face
     from hot2cold.pipeline.g1 import TURN_WEIGHT, turn_rows
     from hot2cold.pipeline.morph import MorphContext, morph
     from hot2cold.settings import Settings
@@ -598,8 +598,9 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     for scale in (1.0, 2.0, 0.5):
         turn = (rows, scale * targets)
         fit = context.fit_face(part, face, edges, turn)
-        direct = morph_face(face, part, cls, field, edges, context.vertex_displacements, context.estimator, settings,
-                            context.trimmed_away, context.noise, turn)
+        inputs = FitInputs(cls, field, context.vertex_displacements, context.estimator, settings,
+                           context.trimmed_away, context.noise)
+        direct = morph_face(face, part, edges, inputs, turn)
         np.testing.assert_allclose(fit.surface.poles, direct.surface.poles, rtol=0, atol=1e-9)
         assert (fit.rank, fit.unknowns, fit.nodes) == (direct.rank, direct.unknowns, direct.nodes)
         if scale == 1.0:

@@ -78,15 +78,46 @@ def _normalised(knots: np.ndarray) -> np.ndarray:
     return (knots - knots[0]) / (knots[-1] - knots[0])
 
 
-def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray,
-         tol: float, estimator: FieldEstimator) -> tuple[Side, np.ndarray] | None:
+@dataclass(frozen=True, eq=False)
+class FitInputs:
+    """What every face fit of one morph reads besides the face, its part and the morphs of its edges.
+
+    Attributes
+    ----------
+    cls : Classification of the field's nodes.
+    field : DisplacementField, hot positions and hot-to-cold displacements, one row per entry of ``cls``.
+    vertex_disp : (nv, 3) float array, each vertex's displacement (eq. 10).
+    estimator : FieldEstimator, the displacements of artificial nodes (eq. 39).
+    settings : Settings.
+    trimmed_away : ``trimmed_away(k, uv (m, 2)) -> (m,) bool``, which parameters lie outside face ``k``'s
+        trimmed domain (None: the whole domain counts).
+    noise : float, the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): a fit is
+        smoothed towards the field's estimate until it leaves that much at the face's nodes
+        (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    """
+
+    cls: Classification
+    field: DisplacementField
+    vertex_disp: np.ndarray
+    estimator: FieldEstimator
+    settings: Settings
+    trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None
+    noise: float = 0.0
+
+
+#: A side row of a surface and its edge's poles may be this share of the part's diagonal apart and still be tied.
+_TIE_SHARE = 1e-7
+
+
+def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], inputs: FitInputs
+         ) -> tuple[Side, np.ndarray] | None:
     """If ``use`` is a whole side compatible with the surface's row there, the side and the displacements
     ``(row length, 3)`` of that row's poles; else None.
 
-    The row and the edge's poles may be up to ``tol`` apart (the part's own gaps): the edge's pole
-    displacements are carried across by the field's change over that gap (``estimator``), as a node's is to
-    its foot point, so that an affine field moves the row exactly (on a NIST part 860 mm across, rows 1e-5 mm
-    off their edges missed it by 2e-8 mm)."""
+    The row and the edge's poles may be up to ``_TIE_SHARE`` of the part's diagonal apart (its own gaps): the
+    edge's pole displacements are carried across by the field's change over that gap (``inputs.estimator``), as
+    a node's is to its foot point, so that an affine field moves the row exactly."""
+    tol, estimator = _TIE_SHARE * part.diagonal, inputs.estimator
     found = side_along(face.surface, use)
     if found is None:
         return None
@@ -98,8 +129,8 @@ def _tie(face: Face, use: EdgeUse, part: Part, edge_morphs: list[EdgeMorph], ver
         if np.ptp(row, axis=0).max() > tol:
             return None
         at = part.vertices[edge.vertices[0]]
-        return side, carried(np.broadcast_to(vertex_disp[edge.vertices[0]], row.shape), np.broadcast_to(at, row.shape),
-                              row, estimator, GAP_SHARE * part.diagonal)
+        moved = np.broadcast_to(inputs.vertex_disp[edge.vertices[0]], row.shape)
+        return side, carried(moved, np.broadcast_to(at, row.shape), row, estimator, GAP_SHARE * part.diagonal)
     curve = edge.curve
     knots = surface.v_knots if side.axis == 0 else surface.u_knots
     degree = surface.v_degree if side.axis == 0 else surface.u_degree
@@ -217,22 +248,20 @@ class FaceProblem:
     tied: tuple[Side, ...]
 
 
-def face_problem(face: Face, part: Part, cls: Classification, field: DisplacementField,
-                 edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-                 settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-                 reduce: bool = False) -> FaceProblem:
+def face_problem(face: Face, part: Part, edge_morphs: list[EdgeMorph], inputs: FitInputs, reduce: bool = False
+                 ) -> FaceProblem:
     """One face's fit with its boundary taken from the morphed edges (see :func:`morph_face`), before its solve;
     ``reduce``: the rows reduced to their QR factor once (:func:`~hot2cold.core.lstsq.reduce_rows`), for a face
     that will be solved again with steering rows."""
+    cls, field, vertex_disp, estimator = inputs.cls, inputs.field, inputs.vertex_disp, inputs.estimator
     surface = face.surface
     nu, nv = surface.shape
-    tol = 1e-7 * part.diagonal
     delta = np.zeros((nu, nv, 3))
     fixed = np.zeros((nu, nv), bool)
     tied = []
     uv_rows, target_rows = [], []
     for use in face.uses:
-        tie = _tie(face, use, part, edge_morphs, vertex_disp, tol, estimator)
+        tie = _tie(face, use, part, edge_morphs, inputs)
         if tie is not None:
             side, row_disp = tie
             index = _row(delta, side)
@@ -263,13 +292,14 @@ def face_problem(face: Face, part: Part, cls: Classification, field: Displacemen
     uv = np.concatenate(uv_rows)
     target = np.concatenate(target_rows)
 
+    trimmed_away = inputs.trimmed_away
     outside = None if trimmed_away is None else (lambda p: trimmed_away(face.index, p))
     centres = _artificial_parameters(surface, uv, outside)
     weight = np.ones(len(uv))
     if len(centres):
         uv = np.concatenate([uv, centres])
         target = np.concatenate([target, estimator(evaluate_surface(surface, centres[:, 0], centres[:, 1]))])
-        weight = np.concatenate([weight, np.full(len(centres), settings.artificial_weight)])
+        weight = np.concatenate([weight, np.full(len(centres), inputs.settings.artificial_weight)])
 
     free = ~fixed.ravel()
     rows = None
@@ -308,10 +338,8 @@ def solve_face(problem: FaceProblem, settings: Settings, noise: float = 0.0, tur
                      problem.artificial, problem.tied, int(free.sum()), rank, condition)
 
 
-def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementField,
-               edge_morphs: list[EdgeMorph], vertex_disp: np.ndarray, estimator: FieldEstimator,
-               settings: Settings, trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-               noise: float = 0.0, turn: tuple | None = None) -> FaceMorph:
+def morph_face(face: Face, part: Part, edge_morphs: list[EdgeMorph], inputs: FitInputs, turn: tuple | None = None
+               ) -> FaceMorph:
     """Morph one face with its boundary taken from the morphed edges (:func:`face_problem`, :func:`solve_face`).
 
     ``turn``: ``(rows, targets)``, more rows of the fit in the face's pole displacements, ``rows (m, nu * nv)``
@@ -319,36 +347,29 @@ def morph_face(face: Face, part: Part, cls: Classification, field: DisplacementF
     into a common plane (:func:`hot2cold.pipeline.g1.turn_rows`).  They steer the fit but leave the cut-off of
     eq. 20 to the nodes' rows (:func:`~hot2cold.core.lstsq.solve_tsvd`'s ``steer``).
 
-    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
-    domain; ``noise`` is the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit
-    is smoothed towards the field's estimate until it leaves that much at the face's nodes
-    (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    ``inputs``: what every face fit of the morph reads (:class:`FitInputs`; its ``noise`` smooths the fit).
     """
-    return solve_face(face_problem(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings,
-                                   trimmed_away), settings, noise, turn)
+    return solve_face(face_problem(face, part, edge_morphs, inputs), inputs.settings, inputs.noise, turn)
 
 
-def morph_faces(part: Part, cls: Classification, field: DisplacementField, edge_morphs: list[EdgeMorph],
-                vertex_disp: np.ndarray, estimator: FieldEstimator, settings: Settings,
-                trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None,
-                progress=None, noise: float = 0.0) -> list[FaceMorph]:
-    """Morph every face of ``part``.
+def morph_faces(part: Part, edge_morphs: list[EdgeMorph], inputs: FitInputs,
+                progress: Callable[[int, int], None] | None = None) -> list[FaceMorph]:
+    """Morph every face of ``part`` (:func:`morph_face`).
 
-    ``trimmed_away(k, uv (m, 2)) -> (m,) bool`` tells which parameters lie outside face ``k``'s trimmed
-    domain; ``progress(done, total)`` is called after each face if given (from the thread that fitted it,
-    with ``settings.threads`` above 1; one call at a time, ``done`` counting up).
+    ``progress(done, total)`` is called after each face if given (from the thread that fitted it, with
+    ``inputs.settings.threads`` above 1; one call at a time, ``done`` counting up).
     """
     lock, done = threading.Lock(), [0]              # counts told one at a time, in order, from any thread
 
     def fit(face: Face) -> FaceMorph:
-        morph = morph_face(face, part, cls, field, edge_morphs, vertex_disp, estimator, settings, trimmed_away, noise)
+        morph = morph_face(face, part, edge_morphs, inputs)
         if progress is not None:
             with lock:
                 done[0] += 1
                 progress(done[0], len(part.faces))
         return morph
 
-    nodes = cls.counts(Role.FACE, len(part.faces))
-    out = map_threads(fit, part.faces, settings.threads, cost=nodes[[face.index for face in part.faces]])
+    nodes = inputs.cls.counts(Role.FACE, len(part.faces))
+    out = map_threads(fit, part.faces, inputs.settings.threads, cost=nodes[[face.index for face in part.faces]])
     log.info("morphed %d faces", len(out))
     return out

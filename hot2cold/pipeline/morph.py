@@ -32,7 +32,7 @@ from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage
                      edge_grids, face_grids, with_slack)
 from .classify import Starts, classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
-from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
+from .face_fit import FaceMorph, FitInputs, face_problem, morph_face, morph_faces, solve_face
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners,
                  correct_g1, edge_decided, kink_bound, kink_maxima, kink_misses, surface_corner_normals,
@@ -176,9 +176,13 @@ class MorphContext:
     def fit_faces(self, edge_morphs: list[EdgeMorph], progress: Callable[[int, int], None] | None = None
                   ) -> list[FaceMorph]:
         """Every face morphed against the morphed edges (eq. 23-38, artificial nodes eq. 39)."""
-        return morph_faces(self.part, self.classification, self.field, edge_morphs, self.vertex_displacements,
-                           self.estimator, self.settings, trimmed_away=self.trimmed_away, progress=progress,
-                           noise=self.noise)
+        return morph_faces(self.part, edge_morphs, self.fit_inputs, progress)
+
+    @property
+    def fit_inputs(self) -> FitInputs:
+        """What every face fit reads of this context (:class:`~hot2cold.pipeline.face_fit.FitInputs`)."""
+        return FitInputs(self.classification, self.field, self.vertex_displacements, self.estimator, self.settings,
+                         self.trimmed_away, self.noise)
 
     def fit_face(self, part: Part, face: Face, edge_morphs: list[EdgeMorph], turn: tuple | None = None
                  ) -> FaceMorph:
@@ -189,16 +193,13 @@ class MorphContext:
         stay the same objects: G1 and G2 fit it again with other turning or bending rows only, at the cost of
         those rows."""
         if not any(face.index in te.faces for te in self.tangent):
-            return morph_face(face, part, self.classification, self.field, edge_morphs, self.vertex_displacements,
-                              self.estimator, self.settings, self.trimmed_away, self.noise, turn)
+            return morph_face(face, part, edge_morphs, self.fit_inputs, turn)
         # what the fit reads besides the context: the face, its edges and their morphs (objects, compared by
         # identity: a refined part or a moved edge is a new object)
         basis = (face, *(part.edges[u.edge] for u in face.uses), *(edge_morphs[u.edge] for u in face.uses))
         kept = self._problems.get(face.index)
         if kept is None or len(kept[0]) != len(basis) or any(a is not b for a, b in zip(kept[0], basis)):
-            kept = basis, face_problem(face, part, self.classification, self.field, edge_morphs,
-                                       self.vertex_displacements, self.estimator, self.settings, self.trimmed_away,
-                                       reduce=True)
+            kept = basis, face_problem(face, part, edge_morphs, self.fit_inputs, reduce=True)
             self._problems[face.index] = kept
         return solve_face(kept[1], self.settings, self.noise, turn)
 
