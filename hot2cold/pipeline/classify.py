@@ -226,14 +226,14 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     starts = starts if starts is not None else Starts(part)
     cloud, cloud_face, apart = starts.cloud(projector, n)
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * apart)
-    boundary = _Boundary.of(part)
+    reach = _Reach(part, _Boundary.of(part), projector, node_distance, edge_distance)
     group_of_face = np.array([face.solid for face in part.faces], int)
     groups = np.unique(group_of_face)
     records = []
     for g in groups:
         keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
-        records.append(_classify_group(part, points, pair_node[keep], pair_face[keep], node_distance,
-                                       edge_distance, starts, projector, boundary, settings.threads))
+        records.append(_classify_group(reach, points, (pair_node[keep], pair_face[keep]), starts,
+                                       settings.threads).arrays())
     if len(records) == 1:
         role, owner, uv, t, foot, distance = records[0]
         node = np.arange(n)
@@ -330,20 +330,51 @@ def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, 
     return FootPoints(uv, distance, fp.settled)
 
 
-def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_face: np.ndarray,
-                    node_distance: float, edge_distance: float, starts: Starts, projector: Projector,
-                    boundary: _Boundary, threads: int = 1):
-    """Classify ``points (N, 3)`` on the faces of the candidate pairs ``(pair_node, pair_face)`` (each
-    ``(c,)``, sorted by face): the arrays role, owner ``(N,)``, uv ``(N, 2)``, t ``(N,)``, foot ``(N, 3)``,
-    distance ``(N,)`` of :class:`Classification`.  The faces' foot points are found in up to ``threads``
-    threads (:func:`~hot2cold.core.threads.map_threads`), then offered to the nodes face by face."""
+@dataclass(eq=False)
+class _Rows:
+    """The arrays of :class:`Classification` for ``n`` nodes, filled in place as faces, edges and vertices
+    claim them: role, owner ``(n,)``, uv ``(n, 2)``, t ``(n,)``, foot ``(n, 3)``, distance ``(n,)``."""
+
+    role: np.ndarray
+    owner: np.ndarray
+    uv: np.ndarray
+    t: np.ndarray
+    foot: np.ndarray
+    distance: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> _Rows:
+        """Every node ignored, owned by none, at no foot point."""
+        return cls(np.full(n, Role.IGNORED), np.full(n, -1), np.full((n, 2), np.nan), np.full(n, np.nan),
+                   np.full((n, 3), np.nan), np.full(n, np.inf))
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        return self.role, self.owner, self.uv, self.t, self.foot, self.distance
+
+
+@dataclass(frozen=True, eq=False)
+class _Reach:
+    """How a group of faces classifies: the part, its boundary's trees, the projector, and the distances (mm)
+    within which a node belongs to a face (``node``) or to an edge or vertex (``edge``)."""
+
+    part: Part
+    boundary: _Boundary
+    projector: Projector
+    node: float
+    edge: float
+
+
+def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], starts: Starts,
+                    threads: int = 1) -> _Rows:
+    """Classify ``points (N, 3)`` on the faces of the candidate ``pairs`` ``(pair_node, pair_face)`` (each
+    ``(c,)``, sorted by face): the arrays of :class:`Classification` (:class:`_Rows`).  The faces' foot points
+    are found in up to ``threads`` threads (:func:`~hot2cold.core.threads.map_threads`), then offered to the
+    nodes face by face."""
+    part, projector, node_distance = reach.part, reach.projector, reach.node
+    pair_node, pair_face = pairs
     n = len(points)
-    role = np.full(n, Role.IGNORED)
-    owner = np.full(n, -1)
-    uv = np.full((n, 2), np.nan)
-    t = np.full(n, np.nan)
-    foot = np.full((n, 3), np.nan)
-    distance = np.full(n, np.inf)
+    rows = _Rows.empty(n)
+    role, owner, uv, foot, distance = rows.role, rows.owner, rows.uv, rows.foot, rows.distance
     best = np.full(n, np.inf)
 
     def offer(k: int, nodes: np.ndarray, f_uv: np.ndarray, f_dist: np.ndarray) -> None:
@@ -381,9 +412,8 @@ def _classify_group(part: Part, points: np.ndarray, pair_node: np.ndarray, pair_
         foot[idx] = evaluate_surface(part.faces[k].surface, uv[idx, 0], uv[idx, 1])
         distance[idx] = best[idx]
 
-    _claim_vertices_and_edges(part, boundary, points, role, owner, uv, t, foot, distance, edge_distance, projector,
-                              np.unique(pair_node), np.unique(pair_face))
-    return role, owner, uv, t, foot, distance
+    _claim_vertices_and_edges(reach, points, rows, np.unique(pair_node), np.unique(pair_face))
+    return rows
 
 
 @dataclass(frozen=True, eq=False)
@@ -419,16 +449,18 @@ class _Boundary:
         return cls(vertices, cKDTree(np.concatenate(samples)), np.concatenate(sample_edge), h)
 
 
-def _claim_vertices_and_edges(part, boundary: _Boundary, points, role, owner, uv, t, foot, distance, edge_distance,
-                              projector, candidates: np.ndarray, faces: np.ndarray):
-    """Re-assign face nodes that lie on a vertex or an edge of their face, and give the ``candidates`` (node
-    indices ``(c,)``) no face took to a vertex or edge of ``faces`` (face indices, the group's) they lie on
-    (in place).
+def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: _Rows, candidates: np.ndarray,
+                              faces: np.ndarray) -> None:
+    """Re-assign face nodes of ``points (N, 3)`` that lie on a vertex or an edge of their face, and give the
+    ``candidates`` (node indices ``(c,)``) no face took to a vertex or edge of ``faces`` (face indices, the
+    group's) they lie on (``rows``, in place).
 
     A node on a corner or an edge is on every face there, but its foot point on each may be classified
     outside when the face's pcurves miss the vertex by more than the classifier's tolerance (the vise's
     vertex 335: the node 5e-10 mm from it, outside both faces).  Such a node still fixes the vertex.
     """
+    part, boundary, projector, edge_distance = reach.part, reach.boundary, reach.projector, reach.edge
+    role, owner, uv, t, foot, distance = rows.arrays()
     taken = role == Role.FACE
     stray = candidates[role[candidates] == Role.IGNORED]
     used = np.concatenate([np.flatnonzero(taken), stray])
