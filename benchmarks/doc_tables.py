@@ -163,6 +163,11 @@ def g1_table() -> str:
     return "\n".join(lines) + "\n"
 
 
+def _shown(page: Path) -> str:
+    """``page`` as a path from the repository when it lies in it, else as it is."""
+    return str(page.relative_to(ROOT)) if page.is_relative_to(ROOT) else str(page)
+
+
 def _indented(text: str, indent: str) -> str:
     return "".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True))
 
@@ -188,7 +193,7 @@ def main(argv=None) -> int:
     differ = [n for n in names if found[n]]
     if args.check:
         for n in differ:
-            print(f"{blocks[n][0].relative_to(ROOT)}: table {n} differs from what the tool prints now:\n  "
+            print(f"{_shown(blocks[n][0])}: table {n} differs from what the tool prints now:\n  "
                   + "\n  ".join(found[n]), file=sys.stderr)
         return 1 if differ else 0
     for page, text in texts.items():

@@ -685,7 +685,7 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.tessellate import tessellate
     from hot2cold.pipeline.artificial import ElementField, FieldEstimator
-    from hot2cold.pipeline.checks import face_grids
+    from hot2cold.pipeline.checks import FaceGridder, FaceNodes
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -695,8 +695,8 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
     mesh = tessellate(part.kernel.hot)
     offset = np.array([0.01, 0.0, 0.0])
     elements = ElementField(mesh.vertices, mesh.triangles, FIELD(mesh.vertices) + offset, reach=0.01, strain=0.1)
-    plain = face_grids(part, projector, cls, result.field, estimator, 20)
-    taken = face_grids(part, projector, cls, result.field, estimator, 20, elements=elements)
+    plain = FaceGridder(projector, FaceNodes(cls, result.field, 20), estimator)(part)
+    taken = FaceGridder(projector, FaceNodes(cls, result.field, 20), estimator, elements)(part)
     for p, t in zip(plain, taken):
         assert np.abs(p.expected - p.hot - FIELD(p.hot)).max() < 1e-9
         assert np.abs(t.expected - t.hot - FIELD(t.hot) - offset).max() < 1e-9
@@ -704,16 +704,15 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
 
 
 @pytest.mark.heavy
-def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(box):
+def test_face_grids_from_kept_face_nodes_are_the_same(box):
     """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.checks.FaceNodes`, as the
     refinement keeps them) give the grids found anew, point for point, and so do grids made without their
-    slack and given it later (:func:`~hot2cold.pipeline.checks.with_slack`); kept for another field they are
-    refused rather than used."""
+    slack and given it later (:func:`~hot2cold.pipeline.checks.with_slack`).  (The gridder takes the
+    classification and the field from its kept nodes, so none can be kept for another field.)"""
     from hot2cold import morph
-    from hot2cold.io.field import DisplacementField
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FaceNodes, face_grids, with_slack
+    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, with_slack
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -721,23 +720,20 @@ def test_face_grids_from_kept_face_nodes_are_the_same_and_refuse_another_field(b
     estimator = FieldEstimator(cls.foot[cls.used], field.displacements[cls.used])
     projector = Projector(part.kernel.faces, part.kernel.edges)
     kept = FaceNodes(cls, field, 20)
-    anew = face_grids(part, projector, cls, field, estimator, 20)
+    anew = FaceGridder(projector, FaceNodes(cls, field, 20), estimator)(part)
+    kept_gridder = FaceGridder(projector, kept, estimator)
     for _ in range(2):                                   # building the kept nodes, then reusing them
-        again = face_grids(part, projector, cls, field, estimator, 20, face_nodes=kept)
+        again = kept_gridder(part)
         for a, g in zip(anew, again):
             np.testing.assert_array_equal(g.expected, a.expected)
             np.testing.assert_array_equal(g.slack, a.slack)
             np.testing.assert_array_equal(g.node_distance, a.node_distance)
     # made without their slack (G1's trials) and given it afterwards: the same grids, in threads too
-    lean = face_grids(part, projector, cls, field, estimator, 20, face_nodes=FaceNodes(cls, field, 20),
-                      with_slack=False)
+    lean = FaceGridder(projector, FaceNodes(cls, field, 20), estimator)(part, slack=False)
     assert any(np.isnan(g.slack).any() for g in lean)
     for a, g in zip(anew, with_slack(part, lean, FaceNodes(cls, field, 20), threads=2)):
         np.testing.assert_array_equal(g.slack, a.slack)
         np.testing.assert_array_equal(g.expected, a.expected)
-    other = DisplacementField(field.points, 2.0 * field.displacements)
-    with pytest.raises(ValueError, match="face_nodes were kept for another"):
-        face_grids(part, projector, cls, other, estimator, 20, face_nodes=kept)
 
 
 def test_cold_face_away_from_the_field_between_the_nodes(tmp_path, box, out, capsys, monkeypatch):
@@ -764,7 +760,7 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.validity import check_solids
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FieldScale, check_cold, face_grids
+    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, FieldScale, check_cold
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -773,7 +769,7 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     estimator = FieldEstimator(cls.foot[used], result.field.displacements[used])
     projector = Projector(part.kernel.faces, part.kernel.edges)
     args = (projector, check_solids(part.kernel.hot), check_solids(result.cold_kernel.shape),
-            FieldScale.of(cls, result.field), face_grids(part, projector, cls, result.field, estimator, 20))
+            FieldScale.of(cls, result.field), FaceGridder(projector, FaceNodes(cls, result.field, 20), estimator)(part))
     fine = check_cold(part, result.cold_kernel, result.faces, *args)
     assert fine.problems == {}
     assert np.nanmax(fine.between) < 1e-9

@@ -776,10 +776,33 @@ class FaceNodes:
         return self._faces[face.index]
 
 
-def face_grids(part: Part, projector: Projector, classification: Classification, field: DisplacementField,
-               estimator: Callable[[np.ndarray], np.ndarray], neighbours: int,
-               faces: list[int] | None = None, elements: ElementField | None = None,
-               face_nodes: FaceNodes | None = None, threads: int = 1, with_slack: bool = True) -> list[FaceGrid]:
+@dataclass(frozen=True, eq=False)
+class FaceGridder:
+    """Makes the :class:`FaceGrid` of a part's faces (calling it: ``gridder(part, faces=None, slack=True)``).
+
+    Attributes
+    ----------
+    projector : Projector onto the hot faces (their trims).
+    face_nodes : FaceNodes, the classification, the field, the neighbour count of the estimates, and each
+        face's nodes and estimate, kept across calls (the refinement asks for a face's grid after every round).
+    estimator : ``estimator(points (m, 3)) -> (m, 3)``, the field's estimate over every node.
+    elements : ElementField or None, the FE model's own field between its nodes, where the field brings its
+        elements and they were taken.
+    threads : the faces are gridded in up to that many threads (:func:`~hot2cold.core.threads.map_threads`).
+    """
+
+    projector: Projector
+    face_nodes: FaceNodes
+    estimator: Callable[[np.ndarray], np.ndarray]
+    elements: ElementField | None = None
+    threads: int = 1
+
+    def __call__(self, part: Part, faces: list[int] | None = None, slack: bool = True) -> list[FaceGrid]:
+        return face_grids(part, self, faces, slack)
+
+
+def face_grids(part: Part, gridder: FaceGridder, faces: list[int] | None = None, with_slack: bool = True
+               ) -> list[FaceGrid]:
     """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the
     part's diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs
     its own grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined
@@ -789,30 +812,25 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
     face, its edges and its vertices; within ``GRID_REACH`` times their spacing, ``Classification.spacing``,
     which is that of the field around them: a plane with nodes only at its corners is near them only next to
     the corners, not across its 150 mm, where the estimate was 0.014 mm off on the vise) are moved by a
-    :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (``neighbours`` nearest); the
-    others by ``estimator`` (over every node).  A thin wall's two sides are nearer each other than the
-    nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
+    :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (the gridder's ``face_nodes``); the
+    others by the gridder's ``estimator`` (over every node).  A thin wall's two sides are nearer each other than
+    the nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
     segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and
     where its nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the
-    estimate over every node, which has nodes all around, is the better one.  With ``elements`` (a field
+    estimate over every node, which has nodes all around, is the better one.  With ``elements`` (the gridder's: a field
     that brings its FE elements, :class:`~hot2cold.pipeline.artificial.ElementField`), the points on the FE
     model's boundary take the elements' own field instead, and all of them are near the nodes: the elements
     say where the part goes between them (the slack there: their distance off the boundary times the strain).
     The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
     elevation keep the surface), so one set of grids serves it and the checks of the cold part.
-    ``face_nodes``: the faces' nodes and estimates kept from earlier calls with the same ``classification``,
-    ``field`` and ``neighbours`` (:class:`FaceNodes`; None: found anew).  The faces are gridded in up to
-    ``threads`` threads (:func:`~hot2cold.core.threads.map_threads`).  ``with_slack=False``: the slack of
+    The faces are gridded in up to the gridder's ``threads`` threads.  ``with_slack=False``: the slack of
     the points near the face's own nodes is left NaN (G1's trial refinement measures distances from
     ``expected`` only, and most trials are not taken; :func:`with_slack` finds it later): 78 % of the time of
     the grid of Rotor 37's largest face with 1 M nodes."""
-    if face_nodes is None:
-        face_nodes = FaceNodes(classification, field, neighbours)
-    elif (face_nodes.classification is not classification or face_nodes.field is not field
-          or face_nodes.neighbours != neighbours):
-        raise ValueError("face_nodes were kept for another classification, field or neighbour count")
+    face_nodes, projector = gridder.face_nodes, gridder.projector
+    estimator, elements = gridder.estimator, gridder.elements
     spacing = CHECK_SPACING * part.diagonal
-    overall = GRID_REACH * classification.spacing()
+    overall = GRID_REACH * face_nodes.classification.spacing()
 
     def grid(face) -> FaceGrid:
         uv = face_grid(face, spacing, projector)
@@ -842,7 +860,7 @@ def face_grids(part: Part, projector: Projector, classification: Classification,
 
     chosen = part.faces if faces is None else [part.faces[k] for k in faces]
     mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
-    return map_threads(grid, chosen, threads, cost=[len(m.nodes) for m in mine])
+    return map_threads(grid, chosen, gridder.threads, cost=[len(m.nodes) for m in mine])
 
 
 def with_slack(part: Part, grids: list[FaceGrid], face_nodes: FaceNodes, threads: int = 1) -> list[FaceGrid]:

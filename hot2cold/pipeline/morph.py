@@ -28,8 +28,8 @@ from scipy import sparse
 from threadpoolctl import threadpool_limits
 
 from .artificial import GAP_SHARE, ElementField, FieldEstimator, carry_to_feet
-from .checks import (FaceGrid, FaceNodes, FieldScale, check_cold, check_coverage, check_hot, check_positions,
-                     edge_grids, face_grids, with_slack)
+from .checks import (FaceGrid, FaceGridder, FaceNodes, FieldScale, check_cold, check_coverage, check_hot,
+                     check_positions, edge_grids, with_slack)
 from .classify import Starts, classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, FitInputs, face_problem, morph_face, morph_faces, solve_face
@@ -788,25 +788,15 @@ def _classify(part: Part, field: DisplacementField, settings: Settings, inverted
     return _Classified(projector, cls, classified, field, noise, allowance, added, FieldScale.of(cls, classified))
 
 
-class _Gridder:
-    """The grids of a morph's faces (:func:`~hot2cold.pipeline.checks.face_grids`), for the refinement, G1 and
-    the checks: the faces' nodes and estimates kept across the rounds (:class:`FaceNodes`), and the FE model's
-    own field between its nodes where it brings its elements and they were taken."""
-
-    def __init__(self, context: MorphContext, classified: _Classified):
-        self.context, self.classified = context, classified
-        fe, cls = classified.fe_field, classified.classification
-        self.elements = (ElementField(fe.points, fe.triangles, fe.displacements, cls.node_distance,
-                                      classified.scale.strain) if classified.element_points else None)
-        self.face_nodes = FaceNodes(cls, classified.field, context.settings.vertex_neighbours)
-
-    def __call__(self, part: Part, faces: list[int], slack: bool = True) -> list[FaceGrid]:
-        """The grids of ``faces`` of ``part`` (the hot one or a refined one), their slack left out where not
-        ``slack``."""
-        settings, classified = self.context.settings, self.classified
-        return face_grids(part, classified.projector, classified.classification, classified.field,
-                          self.context.estimator, settings.vertex_neighbours, faces, self.elements,
-                          self.face_nodes, settings.threads, with_slack=slack)
+def _gridder(context: MorphContext, classified: _Classified) -> FaceGridder:
+    """The grids of a morph's faces (:class:`~hot2cold.pipeline.checks.FaceGridder`), for the refinement, G1
+    and the checks: the faces' nodes and estimates kept across the rounds, and the FE model's own field between
+    its nodes where it brings its elements and they were taken."""
+    fe, cls, settings = classified.fe_field, classified.classification, context.settings
+    elements = (ElementField(fe.points, fe.triangles, fe.displacements, cls.node_distance, classified.scale.strain)
+                if classified.element_points else None)
+    return FaceGridder(classified.projector, FaceNodes(cls, classified.field, settings.vertex_neighbours),
+                       context.estimator, elements, settings.threads)
 
 
 @dataclass(frozen=True, eq=False)
@@ -833,7 +823,7 @@ class _Refined:
 
 
 def _refine(context: MorphContext, classified: _Classified, faces: list[FaceMorph], edges: list[EdgeMorph],
-            regrid: _Gridder) -> _Refined:
+            regrid: FaceGridder) -> _Refined:
     """Refine the fits to the tolerance (beyond the paper; not with ``keep_knots``): knots and cubic degree
     where the error at the nodes or between them misses it (:func:`~hot2cold.pipeline.refine.refine`); then
     the grids of every face on its final knots (a face refined without them never needed one before)."""
@@ -913,7 +903,7 @@ def _rebuild_and_check(context: MorphContext, fits: Fits, classified: _Classifie
     return _Cold(cold, vertices, gaps, hot_checks, cold_checks, check, np.array([g.farthest_node for g in grids]))
 
 
-def _smooth_edges(context: MorphContext, refined: _Refined, corners: list[CornerReport], regrid: _Gridder,
+def _smooth_edges(context: MorphContext, refined: _Refined, corners: list[CornerReport], regrid: FaceGridder,
                   stages: _Stages) -> tuple[MorphContext, list[FaceGrid], Fits]:
     """G1 (section 5, eq. 56-75): corners anchored on trimmed faces, then the kinks along tangent edges; faces
     refined along the edges their nets cannot bring to 0.01 deg (beyond the paper; with the refinement, no
@@ -993,7 +983,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     stages.lap("faces")
 
     # refinement to the tolerance (beyond the paper): from here on the context's part is the refined hot part
-    regrid = _Gridder(context, classified)
+    regrid = _gridder(context, classified)
     refining = settings.tolerance is not None and not settings.keep_knots
     if refining:
         stages.begin("refine")

@@ -553,7 +553,7 @@ class Refitter:
     morphs; ``fit_edges(part, edge_morphs, refined) -> edge_morphs`` fits the edges in the set ``refined``
     again and returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose
     curve object changes counts as changed); ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of
-    each of the (refined) ``faces`` of ``part`` (:func:`~hot2cold.pipeline.checks.face_grids`); the faces of a
+    each of the (refined) ``faces`` of ``part`` (:class:`~hot2cold.pipeline.checks.FaceGridder`); the faces of a
     round are fitted in up to ``threads`` threads; :func:`refine` runs ``max_rounds`` rounds at the most.
     """
 
