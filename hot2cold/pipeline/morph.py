@@ -52,7 +52,7 @@ from ..core.model import Classification, Face, Part, Role
 from ..core.threads import map_threads
 from .refine import (TARGET_SHARE, Refitter, Regrid, Targets, edge_errors, noise_allowance, refine,
                      refine_patches)
-from .report import Checks, Fits, build_report, node_errors
+from .report import Checks, Fits, RunFacts, build_report, node_errors
 from .result import MorphResult, check_result
 from ..settings import Continuity, Settings
 
@@ -934,8 +934,9 @@ def _result(context: MorphContext, classified: _Classified, fits: Fits, cold: _C
     errors = node_errors(part, cls, field, cold.vertices, Projector(cold.kernel.faces, cold.kernel.edges),
                          [f.surface for f in fits.faces], [e.curve for e in fits.edges], settings.threads)
     stages.lap("report")
-    report = build_report(context, fits, cold.checks(), errors, timings=stages.timings, scatter=classified.noise,
-                          allowance=classified.allowance, element_points=classified.element_points, **about)
+    run = RunFacts(timings=stages.timings, scatter=classified.noise, allowance=classified.allowance,
+                   element_points=classified.element_points, **about)
+    report = build_report(context, fits, cold.checks(), errors, run)
     if report.unsupported_faces():                  # the report's text, HTML and JSON say it to the user
         log.info("not measured: %s", report.unsupported_text())
     problems = cold.check.problems

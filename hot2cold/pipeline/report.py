@@ -635,18 +635,37 @@ class Checks:
     farthest_node: np.ndarray | None = None
 
 
-def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarray, *, hot_name: str = "",
-                 timings: dict[str, float] | None = None, inversion: dict | None = None, scatter: float = 0.0,
-                 allowance: float = 0.0, element_points: int = 0) -> Report:
+@dataclass(frozen=True)
+class RunFacts:
+    """What the report says of a run besides its fits and checks.
+
+    Attributes
+    ----------
+    hot_name : the hot part's file (or its type when given as a shape).
+    timings : seconds per stage.
+    inversion : the field inversion's record as a dict (None when the field was not inverted).
+    scatter : the field's scatter about a smooth field (mm, :func:`hot2cold.core.localfit.scatter`).
+    allowance : what the scatter adds to the tolerance at the nodes (mm,
+        :func:`hot2cold.pipeline.refine.noise_allowance`).
+    element_points : how many of the field's points are inside its FE elements rather than nodes
+        (:func:`hot2cold.pipeline.load.element_points`).
+    """
+
+    hot_name: str = ""
+    timings: dict | None = None
+    inversion: dict | None = None
+    scatter: float = 0.0
+    allowance: float = 0.0
+    element_points: int = 0
+
+
+def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarray, run: RunFacts = RunFacts()
+                 ) -> Report:
     """Assemble the :class:`Report` of a morph.
 
     ``context`` gives the (refined) part, the classification, the field and the tolerance; ``errors (N,)``
-    is each node's distance (mm) to the cold part (eq. 21, :func:`node_errors`); ``inversion`` the field
-    inversion's record as a dict (None when the field was not inverted); ``scatter`` the field's scatter
-    about a smooth field (mm, :func:`hot2cold.core.localfit.scatter`) and ``allowance`` what it adds to the
-    tolerance at the nodes (mm, :func:`hot2cold.pipeline.refine.noise_allowance`); ``element_points`` how
-    many of the field's points are inside its FE elements rather than nodes
-    (:func:`hot2cold.pipeline.load.element_points`).
+    is each node's distance (mm) to the cold part (eq. 21, :func:`node_errors`); ``run`` what else the report
+    says of the run (:class:`RunFacts`).
     """
     part, cls, field = context.part, context.classification, context.field
     # the hot faces' areas weigh the share of each face out of its nodes' reach (Verdict.measured)
@@ -676,7 +695,7 @@ def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarra
               for i, (h, c) in enumerate(zip(checks.hot, checks.cold))]
     all_err = errors[used]
     return Report(
-        hot=hot_name, field=field.source, nodes_total=cls.field_nodes,
+        hot=run.hot_name, field=field.source, nodes_total=cls.field_nodes,
         nodes_on_faces=int(np.sum(cls.role == Role.FACE)),
         nodes_on_edges=int(np.sum(cls.role == Role.EDGE)),
         nodes_on_vertices=int(np.sum(cls.role == Role.VERTEX)),
@@ -687,8 +706,8 @@ def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarra
         vertex_delta_max=_stats(vertex_err)[0],
         delta_between=max((f.delta_between for f in faces if not math.isnan(f.delta_between)), default=float("nan")),
         valid=all(s.valid for s in solids), free_edges=sum(s.free_edges for s in solids),
-        faces=faces, edges=edges, solids=solids, timings=dict(timings or {}), inversion=inversion,
-        tolerance=context.settings.tolerance, keep_knots=context.settings.keep_knots, scatter=scatter,
-        allowance=allowance, refinements=[asdict(r) for r in fits.refinements],
+        faces=faces, edges=edges, solids=solids, timings=dict(run.timings or {}), inversion=run.inversion,
+        tolerance=context.settings.tolerance, keep_knots=context.settings.keep_knots, scatter=run.scatter,
+        allowance=run.allowance, refinements=[asdict(r) for r in fits.refinements],
         edge_refinements=[asdict(r) for r in fits.edge_refinements], g1=[asdict(r) for r in fits.g1],
-        element_points=element_points)
+        element_points=run.element_points)
