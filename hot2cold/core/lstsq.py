@@ -274,7 +274,7 @@ def reduce_rows(A, B, block_rows: int | None = None, block_bytes: int = BLOCK_BY
     return ReducedRows(factor, (s, n), float(np.sum(b2 * b2)), b.ndim == 1)
 
 
-def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,
+def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,  # noqa: C901, PLR0913, PLR0915
                noisy_rows: int | None = None, steer: tuple | None = None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES, full_svd_up_to: int = FULL_SVD_UP_TO) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
@@ -522,7 +522,7 @@ def _checked_steer(steer, n: int, k: int) -> tuple:
     return extra, f
 
 
-def _full_rank(r: np.ndarray, c: np.ndarray, total: float, epsilon: float, smoothing: bool,
+def _full_rank(r: np.ndarray, c: np.ndarray, total: float, epsilon: float, smoothing: bool,  # noqa: PLR0913
                target: float, scale: float | None = None) -> TsvdSolution | None:
     """The solution ``R^-1 C`` (x ``(n, k)``) of the tall problem whose QR factors are ``r`` (n, n) and ``c``
     (n, k) (the right-hand side's square sum ``total``) where nothing falls below the cut-off, with a margin,
@@ -559,7 +559,7 @@ def _outside(total: float, projected: np.ndarray) -> float:
     return max(total - float(np.sum(projected * projected)), 0.0)
 
 
-def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, total: float, target: float,
+def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, total: float, target: float,  # noqa: PLR0913
               prior) -> tuple[float, np.ndarray | None]:
     """The Tikhonov solution towards ``prior() (n, k)`` whose residual is ``target``, and its ``lambda``:
     ``(0, None)`` where the plain truncated fit leaves ``target`` or more already.

@@ -947,7 +947,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
     return grids
 
 
-def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,
+def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,  # noqa: C901, PLR0913
                hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale,
                grids: list[FaceGrid], limit: float = np.inf) -> ColdCheck:
     """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per

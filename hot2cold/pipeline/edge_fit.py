@@ -104,7 +104,7 @@ def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEsti
     return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=estimator(curve.poles[1:-1])).x
 
 
-def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
+def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,  # noqa: PLR0913
                estimator: FieldEstimator | None, epsilon: float, index: int = -1,
                artificial_weight: float = 1.0, noise: float = 0.0) -> EdgeMorph:
     """Morph one clamped curve.
@@ -149,7 +149,7 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
                      max(n - 2, 0), rank, condition)
 
 
-def morph_edges(part: Part, cls: Classification, field: DisplacementField, vertex_disp: np.ndarray,
+def morph_edges(part: Part, cls: Classification, field: DisplacementField, vertex_disp: np.ndarray,  # noqa: PLR0913
                 estimator: FieldEstimator, settings: Settings, noise: float = 0.0) -> list[EdgeMorph]:
     """Morph every edge of ``part`` once (degenerate edges are carried as None curves); ``noise`` as in
     :func:`morph_edge`."""

@@ -386,7 +386,7 @@ class _Task:
     keep: np.ndarray      # (m,) bool, rows where both normals are defined
 
 
-def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
+def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],  # noqa: C901, PLR0915
                edges: list[TangentEdge] | None = None,
                n_points_factor: int = 2, frozen: dict[int, str] | None = None
                ) -> tuple[list[BSplineSurface], list[G1Report]]:
@@ -563,7 +563,7 @@ def kink_misses(part: Part, surfaces: list[BSplineSurface], edges: list[TangentE
 TURN_WEIGHT = 10.0
 
 
-def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
+def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,  # noqa: PLR0913
               n_points_factor: int = 2, kept: frozenset = frozenset(), sides: bool = False
               ) -> tuple[np.ndarray, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that turn its
@@ -740,7 +740,7 @@ def _spread(normals: dict) -> float:
     return max((_line_angle(a, b) for i, a in enumerate(vals) for b in vals[i + 1:]), default=0.0)
 
 
-def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
+def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],  # noqa: C901, PLR0913, PLR0915
                     noise_deg: float = 1e-6, anchors: dict | None = None,
                     decided: set[tuple[int, int]] | None = None, strain: float = 0.0
                     ) -> tuple[list[BSplineCurve | None], list[CornerReport]]:

@@ -137,7 +137,7 @@ def edge_jump(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> 
                          jump.normal).relative(1.0 / part.diagonal)
 
 
-def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,
+def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,  # noqa: PLR0913
               n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[sparse.csr_array, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that give its
     normal curvature across each of ``edges`` it bounds the common value.

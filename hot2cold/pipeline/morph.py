@@ -136,7 +136,7 @@ class MorphContext:
     _problems: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
-    def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,
+    def of(cls, part: Part, classification: Classification, field: DisplacementField, settings: Settings,  # noqa: PLR0913
            projector: Projector, strain: float = 0.0, noise: float = 0.0) -> MorphContext:
         """The context of a classified field: the vertex displacements (eq. 10) from the nodes on or near
         the vertices, an estimator over the used nodes' foot points, the tangent edges."""
@@ -272,7 +272,7 @@ class MorphContext:
             faces[k] = morph
         return edge_morphs, faces, corners
 
-    def correct_g1(self, face_morphs: list[FaceMorph], corners: list[CornerReport], grids: list[FaceGrid],
+    def correct_g1(self, face_morphs: list[FaceMorph], corners: list[CornerReport], grids: list[FaceGrid],  # noqa: C901
                    edge_morphs: list[EdgeMorph]) -> tuple[list[FaceMorph], list[G1Report]]:
         """The kinks the morph added along tangent edges (and at their corners) removed from the faces
         (eq. 56-75; along trimming curves by fitting the faces again with their tangents turned there,
@@ -413,7 +413,7 @@ class MorphContext:
                          *r.faces, before, now, why or "within the tolerance")
         return face_morphs, out
 
-    def _bend(self, current: list[BSplineSurface], plain: list[BSplineSurface], bend: list[TangentEdge],
+    def _bend(self, current: list[BSplineSurface], plain: list[BSplineSurface], bend: list[TangentEdge],  # noqa: PLR0913
               weight: float, kinks: dict[int, float], grids: list[FaceGrid], edge_morphs: list[EdgeMorph],
               refused_before: set[int]) -> tuple[dict[int, FaceMorph], dict[int, str]]:
         """The faces of the ``bend`` edges fitted again with bend rows of ``weight`` towards the common
@@ -506,7 +506,7 @@ class MorphContext:
         feet = clip_uv(after, feet)
         return float(np.linalg.norm(targets - evaluate_surface(after, feet[:, 0], feet[:, 1]), axis=1).max())
 
-    def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
+    def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,  # noqa: PLR0913
                    share: float | None = None, verb: str = "turning", floor: float | None = None) -> str:
         """Why face ``k`` may not take the G1-corrected surface ``after`` in place of ``before`` (its fit): its
         largest distance to its nodes' cold targets (eq. 21) or to the field's estimate over its ``grid``
@@ -576,10 +576,13 @@ class _Stages:
             self._progress(stage, done, total)
 
 
-def morph(hot, field, settings: Settings | None = None, *, units: str | None = None, field_name: str | None = None,
+def morph(hot, field, settings: Settings | None = None, *, units: str | None = None, field_name: str | None = None,  # noqa: PLR0913
           field_step: int | None = None, columns=None, field_points=None, invert: bool = False,
           progress: Progress | None = None, check: bool = True) -> MorphResult:
     """Morph the hot part with an FE displacement field into the cold part.
+
+    The library's entry point: its keywords are the user's options of the field (as the command line's
+    flags), so it takes more than six parameters; :class:`~hot2cold.settings.Settings` holds the rest.
 
     Parameters
     ----------
@@ -647,7 +650,7 @@ def _refined_off(context: MorphContext, before: list[FaceMorph], after: list[Fac
     return off
 
 
-def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph],
+def _g1(context: MorphContext, edge_morphs: list[EdgeMorph], face_morphs: list[FaceMorph],  # noqa: PLR0913
         corners: list[CornerReport], grids: list[FaceGrid], shortest: np.ndarray | None, regrid: Regrid
         ) -> tuple[MorphContext, list[FaceGrid], list[EdgeMorph], list[FaceMorph], list[G1Report]]:
     """G1 on the fits ``edge_morphs``, ``face_morphs``: the corners of tangent edges anchored on trimmed
@@ -721,7 +724,7 @@ def smoothing_noise(scatter: float, settings: Settings) -> float:
 NOISY_SHARE = 0.1
 
 
-def _classified(part, field: DisplacementField, settings: Settings, projector: Projector, starts: Starts,
+def _classified(part, field: DisplacementField, settings: Settings, projector: Projector, starts: Starts,  # noqa: PLR0913
                 check: bool = True, inverted: bool = False) -> tuple[Classification, DisplacementField, float]:
     """Classify ``field`` (METHOD step 2) and, with ``check``, check first that hot and cold are not mixed up
     in it (``inverted``: it was inverted, ``--invert``) and then that it covers the part: the classification,

@@ -299,7 +299,7 @@ class FaceErrors(NamedTuple):
     between: float
 
 
-def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField, grid: FaceGrid,
+def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField, grid: FaceGrid,  # noqa: PLR0913
                  edge_morphs: list[EdgeMorph], edges: list[Edge], limit: float = 0.0) -> FaceErrors:
     """Errors of a face: the distances of eq. (21) at its nodes, of the field's local estimate at its
     ``grid`` points, and of its cold edges at their pcurves' points beyond the hot edges' own (the gap the

@@ -465,7 +465,7 @@ class Report:
         limit = (self.tolerance or math.inf) + (self.allowance or 0.0)
         return max(refinement.get("delta_max_after", 0.0), refinement.get("between_after", 0.0)) > limit
 
-    def table(self) -> str:
+    def table(self) -> str:  # noqa: C901, PLR0915
         """A short text table: the verdict first (:attr:`verdict`), then per face as the paper's Table 1, then
         the overall checks."""
         lines = [self.verdict.text,
@@ -573,7 +573,7 @@ def _stats(d: np.ndarray) -> tuple[float, float]:
     return (float(d.max()), float(d.mean())) if len(d) else (float("nan"), float("nan"))
 
 
-def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,
+def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,  # noqa: PLR0913
                 projector: Projector, cold_surfaces: list, cold_curves: list, threads: int = 1) -> np.ndarray:
     """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry (eq. 21).
 
