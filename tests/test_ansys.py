@@ -235,7 +235,7 @@ def test_bad_files_refused(tmp_path):
     noise.write_bytes(np.random.default_rng(1).bytes(50_000))
     one_line_error(noise, r"noise\.rst is not an ANSYS binary result file")
     one_line_error(examples.fullfile, r"file\.full is an MAPDL full matrix \(\.full\) file, not a result file")
-    one_line_error(tmp_path / "missing.rst", r"missing\.rst cannot be read")
+    one_line_error(tmp_path / "missing.rst", r"^ANSYS result file not found: .*missing\.rst; check the path$")
     raw = bytearray(FILES["box_si"][0].read_bytes())
     words = np.frombuffer(raw, "<i4").copy()
     words[105 + 15] = words[105 + 9] + 10                       # the geometry pointer past the end of the data

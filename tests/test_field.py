@@ -511,3 +511,32 @@ def test_units_none_is_the_file_s_own_else_mm(tmp_path):
 def test_bad_path_type():
     with pytest.raises(FieldError, match="field path must be a file name"):
         read_field(3.5)
+
+
+@pytest.mark.parametrize("read, what, name", [
+    ("hot2cold.io.nastran:read_op2", "Nastran OP2 file", "r.op2"),
+    ("hot2cold.io.nastran:read_punch", "Nastran punch file", "r.pch"),
+    ("hot2cold.io.nastran:read_bdf_grids", "Nastran bulk data file", "m.bdf"),
+    ("hot2cold.io.frd:read_frd", "CalculiX results file", "r.frd"),
+    ("hot2cold.io.ansys:read_rst", "ANSYS result file", "r.rst"),
+])
+def test_every_solver_reader_refuses_a_missing_file_or_a_folder_in_the_one_wording(tmp_path, read, what, name):
+    """The solver readers open their files through the one input check (:mod:`hot2cold.io.inputs`): the same
+    words as the STEP and field files, naming the kind of file."""
+    import importlib
+
+    module, function = read.split(":")
+    reader = getattr(importlib.import_module(module), function)
+    with pytest.raises(FieldError, match=rf"^{what} not found: .*{name}; check the path$"):
+        reader(tmp_path / name)
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(FieldError, match=rf"^{what} .*folder is a folder: give the file itself$"):
+        reader(tmp_path / "folder")
+
+
+def test_the_jobs_file_is_checked_as_every_input(tmp_path):
+    from hot2cold.cli.batch import read_jobs
+
+    with pytest.raises(InputError, match=r"^jobs file not found: .*jobs\.csv; check the path$"):
+        read_jobs(tmp_path / "jobs.csv")
+

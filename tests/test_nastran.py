@@ -183,7 +183,7 @@ def test_punch_renamed_op2(tmp_path):
 
 
 def test_missing_file(tmp_path):
-    one_line_error(lambda: read_op2(tmp_path / "none.op2"), "cannot read", "none.op2")
+    one_line_error(lambda: read_op2(tmp_path / "none.op2"), "Nastran OP2 file not found:", "none.op2")
 
 
 @pytest.mark.parametrize("head,word", [(struct.pack("<i", 8), "64-bit"), (struct.pack(">i", 4), "big-endian")])

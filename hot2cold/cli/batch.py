@@ -106,9 +106,7 @@ def read_jobs(path: str | os.PathLike, summary: str | os.PathLike | None = None)
     """The jobs of a CSV or TOML jobs file, checked as a whole: required columns, known options, valid
     values, unique names, no output twice, no output equal to an input (or to ``summary``), every output
     folder present.  Raises :class:`InputError` with one line (where in the file, what is wrong)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"jobs file not found: {path}")
+    path = check_input_file(path, "jobs file", InputError)
     kind = path.suffix.lower()
     if kind == ".toml":
         rows = _toml_rows(path)

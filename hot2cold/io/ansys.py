@@ -64,6 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FieldError, one_line
+from .inputs import check_input_file
 
 __all__ = ["AnsysResult", "read_rst", "UNIT_SYSTEMS"]
 
@@ -130,6 +131,7 @@ def read_rst(path: str, field_name: str | None = None, step: int | None = None) 
         raise FieldError(f"ANSYS result file {path}: give the result set by step or by field_name, not both")
     if step is not None and (isinstance(step, bool) or not isinstance(step, (int, np.integer))):
         raise FieldError(f"ANSYS result file {path}: step must be an integer (a result set index), got {step!r}")
+    check_input_file(path, "ANSYS result file", FieldError)
     unit_code = _check_structure(path)
     try:
         import warnings

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..errors import FieldError
 from .cells import element_triangles
+from .inputs import read_input_bytes
 
 __all__ = ["FrdFile", "FrdResult", "parse_frd", "read_frd", "HOT_TO_COLD_HEADING", "ELEMENT_NODES",
            "ELEMENT_TYPES"]
@@ -449,11 +450,7 @@ class FrdFile:
     def read(cls, path) -> FrdFile:
         """Read and scan the file at ``path`` (str or os.PathLike)."""
         fspath = os.path.expanduser(os.fspath(path))
-        try:
-            with open(fspath, "rb") as fh:
-                raw = fh.read()
-        except OSError as exc:
-            raise FieldError(f"cannot read results file {fspath}: {' '.join(str(exc).split())}") from None
+        raw = read_input_bytes(fspath, "CalculiX results file", FieldError)
         return cls(raw.decode("latin-1"), fspath)
 
     def is_hot_to_cold(self) -> bool:

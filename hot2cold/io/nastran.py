@@ -63,7 +63,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hot2cold.errors import FieldError
+from ..errors import FieldError
+from .inputs import check_input_file, read_input_bytes
 
 __all__ = ["NastranResult", "read_op2", "read_punch", "read_bdf_grids"]
 
@@ -506,6 +507,7 @@ def read_op2(path: str, field_name: str | None = None, step: int | None = None) 
     (then ``displacements`` are in the grids' CD systems, as written).
     """
     path = os.fspath(path)
+    check_input_file(path, "Nastran OP2 file", FieldError)
     try:
         with open(path, "rb") as f:
             if os.fstat(f.fileno()).st_size == 0:
@@ -628,11 +630,7 @@ def read_punch(path: str, field_name: str | None = None, step: int | None = None
     systems) and ``points`` ``None``: a punch file has no positions (see :func:`read_bdf_grids`).
     """
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            raw = f.read()
-    except OSError as e:
-        raise FieldError(f"cannot read {path}: {e.strerror or e}") from None
+    raw = read_input_bytes(path, "Nastran punch file", FieldError)
     if not raw.strip():
         raise FieldError(f"{path} is empty; write the punch file again")
     if b"\0" in raw[:4096]:
@@ -708,11 +706,7 @@ def _fields(line: str, large: bool) -> list[str]:
 
 def _bulk_lines(path: str, seen: tuple = ()) -> list[tuple[str, str]]:
     """(where, text) of the bulk data lines of ``path`` and its INCLUDE files, comments removed."""
-    try:
-        with open(path, encoding="latin-1") as f:
-            lines = f.read().splitlines()
-    except OSError as e:
-        raise FieldError(f"cannot read {path}: {e.strerror or e}") from None
+    lines = read_input_bytes(path, "Nastran bulk data file", FieldError).decode("latin-1").splitlines()
     bulk = [i for i, v in enumerate(lines) if v.upper().startswith("BEGIN BULK")] if not seen else []
     start = bulk[0] + 1 if bulk else 0
     out = []
