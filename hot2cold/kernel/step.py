@@ -72,17 +72,29 @@ def read_step(path: str | os.PathLike) -> TopoDS_Shape:
     """
     path = check_step_file(path)
     reader = STEPControl_Reader()
+    shape = read_through(reader, path, lambda: reader.TransferRoots() > 0, reader.OneShape)
+    log.info("read %s", path)
+    return shape
+
+
+def read_through(reader, path: Path, transfer, one_shape) -> TopoDS_Shape:
+    """The one way a STEP file is read, plain (:func:`read_step`) or through XCAF
+    (:func:`hot2cold.kernel.xcaf.read_step_styles`): ``reader.ReadFile``, then ``transfer()`` (True when it
+    transferred a shape), then ``one_shape()``, checked to hold a solid; every failure of the kernel on the way
+    a :class:`StepReadError` in the same words."""
     try:
         status = reader.ReadFile(str(path))
     except Exception as exc:  # the kernel raises Standard_Failure on some corrupt files
         raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
     if status != IFSelect_RetDone:
         raise refused(path, status)
-    if reader.TransferRoots() == 0:
+    try:
+        transferred = transfer()
+    except Exception as exc:
+        raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
+    if not transferred:
         raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
-    shape = check_step_shape(reader.OneShape(), path)
-    log.info("read %s", path)
-    return shape
+    return check_step_shape(one_shape(), path)
 
 
 def write_step(shape: TopoDS_Shape, path: str | os.PathLike, verify: bool = False) -> None:

@@ -25,7 +25,6 @@ import logging
 import os
 from dataclasses import dataclass
 
-from OCP.IFSelect import IFSelect_RetDone
 from OCP.Interface import Interface_Static
 from OCP.Quantity import Quantity_ColorRGBA
 from OCP.STEPCAFControl import STEPCAFControl_Reader, STEPCAFControl_Writer
@@ -42,9 +41,8 @@ from OCP.XCAFApp import XCAFApp_Application
 from OCP.XCAFDoc import (XCAFDoc_ColorCurv, XCAFDoc_ColorGen, XCAFDoc_ColorSurf, XCAFDoc_ColorTool,
                          XCAFDoc_DocumentTool, XCAFDoc_ShapeTool)
 
-from ..errors import KernelError, StepReadError
-from .step import (check_output_folder, check_step_file, check_step_shape, console_quiet, refused,
-                   write_translated)
+from ..errors import KernelError
+from .step import check_output_folder, check_step_file, console_quiet, read_through, write_translated
 from .explore import index_map
 
 log = logging.getLogger(__name__)
@@ -412,19 +410,8 @@ def read_step_styles(path: str | os.PathLike) -> tuple[TopoDS_Shape, Styles]:
         off(False)
     document = _new_document()
     with _Statics(read__stepcaf__subshapes__name=1):
-        try:
-            status = reader.ReadFile(str(path))
-        except Exception as exc:  # the kernel raises Standard_Failure on some corrupt files
-            raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
-        if status != IFSelect_RetDone:
-            raise refused(path, status)
-        try:
-            transferred = reader.Transfer(document)
-        except Exception as exc:
-            raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
-    if not transferred or reader.Reader().NbShapes() == 0:
-        raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
-    shape = check_step_shape(reader.Reader().OneShape(), path)
+        shape = read_through(reader, path, lambda: reader.Transfer(document) and reader.Reader().NbShapes() > 0,
+                             lambda: reader.Reader().OneShape())
     try:
         walker = _Reader(document, shape)
         styles = walker.styles()
