@@ -580,7 +580,8 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
 
     from hot2cold.core.lstsq import ReducedRows
     from hot2cold.kernel.project import Projector
-    from hot2cold.pipeline.face_fit import FitInputs, morph_face
+    from hot2cold.pipeline.face_fit import morph_face
+    from hot2cold.pipeline.fit_inputs import FitInputs
     from hot2cold.pipeline.g1 import TURN_WEIGHT, turn_rows
     from hot2cold.pipeline.morph import MorphContext, morph
     from hot2cold.settings import Settings

@@ -23,7 +23,7 @@ from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve, knot_break
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
 from ..core.model import Classification, Edge, Part, Role
-from ..settings import Settings
+from .fit_inputs import FitInputs
 
 log = logging.getLogger(__name__)
 
@@ -149,10 +149,10 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
                      max(n - 2, 0), rank, condition)
 
 
-def morph_edges(part: Part, cls: Classification, field: DisplacementField, vertex_disp: np.ndarray,  # noqa: PLR0913
-                estimator: FieldEstimator, settings: Settings, noise: float = 0.0) -> list[EdgeMorph]:
-    """Morph every edge of ``part`` once (degenerate edges are carried as None curves); ``noise`` as in
-    :func:`morph_edge`."""
+def morph_edges(part: Part, inputs: FitInputs) -> list[EdgeMorph]:
+    """Morph every edge of ``part`` once (degenerate edges are carried as None curves), from the nodes,
+    estimate, settings and noise of ``inputs`` (:func:`morph_edge`)."""
+    cls, field, settings, estimator = inputs.cls, inputs.field, inputs.settings, inputs.estimator
     out = []
     for edge in part.edges:
         if edge.degenerate:
@@ -160,7 +160,7 @@ def morph_edges(part: Part, cls: Classification, field: DisplacementField, verte
             continue
         nodes = cls.nodes_of(Role.EDGE, edge.index)
         out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
-                              end_displacements(part, edge, vertex_disp, estimator), estimator, settings.svd_epsilon,
-                              edge.index, settings.artificial_weight, noise))
+                              end_displacements(part, edge, inputs.vertex_disp, estimator), estimator,
+                              settings.svd_epsilon, edge.index, settings.artificial_weight, inputs.noise))
     log.info("morphed %d edges", len(out))
     return out

@@ -31,9 +31,9 @@ from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
 from ..core.bspline import (BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks, span_cells,
                             surface_basis)
 from .edge_fit import EdgeMorph
-from ..io.field import DisplacementField
+from .fit_inputs import FitInputs
 from ..core.lstsq import ReducedRows, reduce_rows, solve_tsvd
-from ..core.model import Classification, EdgeUse, Face, Part, Role, Side, side_along
+from ..core.model import EdgeUse, Face, Part, Role, Side, side_along
 from ..core.threads import map_threads
 from ..settings import Settings
 
@@ -76,33 +76,6 @@ def _row(array: np.ndarray, side: Side) -> tuple:
 
 def _normalised(knots: np.ndarray) -> np.ndarray:
     return (knots - knots[0]) / (knots[-1] - knots[0])
-
-
-@dataclass(frozen=True, eq=False)
-class FitInputs:
-    """What every face fit of one morph reads besides the face, its part and the morphs of its edges.
-
-    Attributes
-    ----------
-    cls : Classification of the field's nodes.
-    field : DisplacementField, hot positions and hot-to-cold displacements, one row per entry of ``cls``.
-    vertex_disp : (nv, 3) float array, each vertex's displacement (eq. 10).
-    estimator : FieldEstimator, the displacements of artificial nodes (eq. 39).
-    settings : Settings.
-    trimmed_away : ``trimmed_away(k, uv (m, 2)) -> (m,) bool``, which parameters lie outside face ``k``'s
-        trimmed domain (None: the whole domain counts).
-    noise : float, the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): a fit is
-        smoothed towards the field's estimate until it leaves that much at the face's nodes
-        (:func:`~hot2cold.core.lstsq.solve_tsvd`).
-    """
-
-    cls: Classification
-    field: DisplacementField
-    vertex_disp: np.ndarray
-    estimator: FieldEstimator
-    settings: Settings
-    trimmed_away: Callable[[int, np.ndarray], np.ndarray] | None = None
-    noise: float = 0.0
 
 
 #: A side row of a surface and its edge's poles may be this share of the part's diagonal apart and still be tied.

@@ -32,7 +32,8 @@ from .checks import (FaceGrid, FaceGridder, FaceNodes, FieldScale, check_cold, c
                      check_positions, edge_grids, with_slack)
 from .classify import Starts, classify_nodes
 from .edge_fit import EdgeMorph, end_displacements, morph_edge, morph_edges, vertex_displacements
-from .face_fit import FaceMorph, FitInputs, face_problem, morph_face, morph_faces, solve_face
+from .fit_inputs import FitInputs
+from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from ..io.field import DisplacementField, as_field
 from .g1 import (ALONG_CURVE, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge, correct_corners,
                  correct_g1, edge_decided, kink_bound, kink_maxima, kink_misses, surface_corner_normals,
@@ -165,8 +166,7 @@ class MorphContext:
     def fit_edges(self) -> tuple[list[EdgeMorph], list[CornerReport]]:
         """Every edge morphed (eq. 10-20), and at the ends of tangent edges given one tangent plane per corner
         (paper section 5); returns the edge morphs and the corner reports."""
-        edge_morphs = morph_edges(self.part, self.classification, self.field, self.vertex_displacements,
-                                  self.estimator, self.settings, self.noise)
+        edge_morphs = morph_edges(self.part, self.fit_inputs)
         if not self.tangent:
             return edge_morphs, []
         curves, corners = correct_corners(self.part, [e.curve for e in edge_morphs], self.tangent,
