@@ -53,7 +53,7 @@ from ..core.model import Classification, Face, Part, Role
 from ..core.threads import map_threads
 from .refine import (TARGET_SHARE, Refitter, Regrid, Targets, edge_errors, noise_allowance, refine,
                      refine_patches)
-from .report import Checks, Fits, RunFacts, build_report, node_errors
+from .report import Checks, ColdGeometry, Fits, RunFacts, build_report, node_errors
 from .result import MorphResult, check_result
 from ..settings import Continuity, Settings
 
@@ -934,8 +934,9 @@ def _result(context: MorphContext, classified: _Classified, fits: Fits, cold: _C
     inversion)."""
     part, cls, field, settings = context.part, classified.classification, classified.field, context.settings
     stages.begin("report", len(cls.used))
-    errors = node_errors(part, cls, field, cold.vertices, Projector(cold.kernel.faces, cold.kernel.edges),
-                         [f.surface for f in fits.faces], [e.curve for e in fits.edges], settings.threads)
+    geometry = ColdGeometry(cold.vertices, Projector(cold.kernel.faces, cold.kernel.edges),
+                            [f.surface for f in fits.faces], [e.curve for e in fits.edges])
+    errors = node_errors(cls, field, geometry, settings.threads)
     stages.lap("report")
     run = RunFacts(timings=stages.timings, scatter=classified.noise, allowance=classified.allowance,
                    element_points=classified.element_points, **about)

@@ -573,17 +573,29 @@ def _stats(d: np.ndarray) -> tuple[float, float]:
     return (float(d.max()), float(d.mean())) if len(d) else (float("nan"), float("nan"))
 
 
-def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_vertices: np.ndarray,  # noqa: PLR0913
-                projector: Projector, cold_surfaces: list, cold_curves: list, threads: int = 1) -> np.ndarray:
-    """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry (eq. 21).
+@dataclass(frozen=True, eq=False)
+class ColdGeometry:
+    """The morphed geometry the nodes are measured against (eq. 21): the cold ``vertices (nv, 3)``, a
+    ``projector`` onto the cold faces and edges, and the cold ``surfaces`` (one BSplineSurface per face) and
+    ``curves`` (one BSplineCurve per edge, None where degenerate)."""
 
-    ``projector`` projects onto the *morphed* faces and edges; ignored nodes get NaN.  On the cold surfaces
-    ``cold_surfaces`` (one BSplineSurface per face) the face nodes' foot points are found by Newton's method
-    from their hot parameters (:mod:`hot2cold.core.footpoint`); the kernel is asked only where that does not
-    settle.  The edge nodes' foot points are the kernel's, polished by Gauss-Newton on the cold curves
-    ``cold_curves`` (one BSplineCurve per edge, None where degenerate): the kernel's projection stops about
-    2e-8 mm short on Rotor 67's degree-14 edges.  The faces' Newton runs in up to ``threads`` threads.
+    vertices: np.ndarray
+    projector: Projector
+    surfaces: list
+    curves: list
+
+
+def node_errors(cls: Classification, field: DisplacementField, cold: ColdGeometry, threads: int = 1) -> np.ndarray:
+    """Distance ``(N,)`` (mm) of every used node's cold target point to the morphed geometry ``cold``
+    (eq. 21); ignored nodes get NaN.
+
+    On the cold surfaces the face nodes' foot points are found by Newton's method from their hot parameters
+    (:mod:`hot2cold.core.footpoint`); the kernel (``cold.projector``) is asked only where that does not
+    settle.  The edge nodes' foot points are the kernel's, polished by Gauss-Newton on the cold curves: the
+    kernel's projection stops short of the foot point on edges of high degree.  The faces' Newton runs in up
+    to ``threads`` threads.
     """
+    projector, cold_surfaces, cold_curves = cold.projector, cold.surfaces, cold.curves
     errors = np.full(len(cls.role), np.nan)
     target = cls.foot + field.displacements
     faces = [(k, nodes, projector.face_box(k)) for k, nodes in cls.groups(Role.FACE)]
@@ -601,7 +613,7 @@ def node_errors(part: Part, cls: Classification, field: DisplacementField, cold_
             distance[found] = curve_distances(cold_curves[k], target[nodes][found], t[found])
         errors[nodes] = distance
     at_vertex = np.flatnonzero(cls.role == Role.VERTEX)
-    errors[at_vertex] = np.linalg.norm(target[at_vertex] - cold_vertices[cls.owner[at_vertex]], axis=1)
+    errors[at_vertex] = np.linalg.norm(target[at_vertex] - cold.vertices[cls.owner[at_vertex]], axis=1)
     return errors
 
 
