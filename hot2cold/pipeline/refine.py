@@ -299,29 +299,6 @@ class FaceErrors(NamedTuple):
     between: float
 
 
-def _face_errors(face: Face, morph: FaceMorph, cls: Classification, field: DisplacementField, grid: FaceGrid,  # noqa: PLR0913
-                 edge_morphs: list[EdgeMorph], edges: list[Edge], limit: float = 0.0) -> FaceErrors:
-    """Errors of a face: the distances of eq. (21) at its nodes, of the field's local estimate at its
-    ``grid`` points, and of its cold edges at their pcurves' points beyond the hot edges' own (the gap the
-    morph opened, which the sew would have to close; a hot part's gaps are its own: a Handle_SO101 face on
-    triangulation nodes sat 1.12 mm from its hot edge, and six rounds of refinement could not close it)."""
-    nodes = cls.nodes_of(Role.FACE, face.index)
-    target = cls.foot[nodes] + field.displacements[nodes]
-    at_nodes = surface_distances_above(morph.surface, target, cls.uv[nodes], face.uv_box, limit)
-    off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
-    uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
-    for use in face.uses:
-        if edges[use.edge].degenerate:
-            continue
-        uv.append(use.uv)
-        cold = surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
-                                 face.uv_box)
-        hot = surface_distances(face.surface, evaluate_curve(edges[use.edge].curve, use.t), use.uv, face.uv_box)
-        error.append(np.maximum(cold - hot, 0.0))
-    between = np.concatenate(error[1:])
-    return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
-
-
 def _largest(err: np.ndarray) -> float:
     return float(err.max()) if len(err) else 0.0
 
@@ -703,8 +680,27 @@ class _Refining:
         self.rounds = 0
 
     def _face_errors(self, k: int) -> FaceErrors:
-        return _face_errors(self.part.faces[k], self.faces[k], self.cls, self.field, self.targets.grids[k],
-                            self.edges, self.part.edges, self.targets.limit)
+        """Errors of face ``k``: the distances of eq. (21) at its nodes, of the field's local estimate at its
+        grid points, and of its cold edges at their pcurves' points beyond the hot edges' own (the gap the
+        morph opened, which the sew would have to close; a hot part's gaps are its own)."""
+        face, morph, cls, field = self.part.faces[k], self.faces[k], self.cls, self.field
+        grid, edges, edge_morphs = self.targets.grids[k], self.part.edges, self.edges
+        nodes = cls.nodes_of(Role.FACE, face.index)
+        target = cls.foot[nodes] + field.displacements[nodes]
+        at_nodes = surface_distances_above(morph.surface, target, cls.uv[nodes], face.uv_box, self.targets.limit)
+        off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
+        uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
+        for use in face.uses:
+            if edges[use.edge].degenerate:
+                continue
+            uv.append(use.uv)
+            cold = surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
+                                     face.uv_box)
+            hot = surface_distances(face.surface, evaluate_curve(edges[use.edge].curve, use.t), use.uv,
+                                    face.uv_box)
+            error.append(np.maximum(cold - hot, 0.0))
+        between = np.concatenate(error[1:])
+        return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
 
     def _edge_errors(self, e: int) -> EdgeErrors:
         return _edge_errors(self.part.edges[e], self.edges[e], self.cls, self.field, self.targets.edge_grids[e])
