@@ -465,9 +465,14 @@ class Report:
         limit = (self.tolerance or math.inf) + (self.allowance or 0.0)
         return max(refinement.get("delta_max_after", 0.0), refinement.get("between_after", 0.0)) > limit
 
-    def table(self) -> str:  # noqa: C901, PLR0915
+    def table(self) -> str:
         """A short text table: the verdict first (:attr:`verdict`), then per face as the paper's Table 1, then
         the overall checks."""
+        lines = self._counts_lines() + self._refinement_lines() + self._g1_lines() + self._closing_lines()
+        return "\n".join(lines)
+
+    def _counts_lines(self) -> list[str]:
+        """The verdict, the per-face table, and the counts of edges, nodes and solids."""
         lines = [self.verdict.text,
                  f"{'face':>5} {'FE nodes':>9} {'control points':>15} {'Δmax [mm]':>10} {'Δmean [mm]':>10}  name"]
         for f in self.faces:
@@ -488,6 +493,11 @@ class Report:
             lines.append(f"solid {s.index}{name}: {'valid' if s.valid else 'INVALID'}, "
                          f"{'closed' if s.closed else f'{s.free_edges} free edges'}, {s.faces} faces, "
                          f"volume hot {s.volume_hot:.6g} mm³, cold {s.volume_cold:.6g} mm³")
+        return lines
+
+    def _refinement_lines(self) -> list[str]:
+        """A line per face and edge the refinement changed, or that misses the tolerance unrefined."""
+        lines: list[str] = []
         short = "its knot spans there are as short as the nodes' spacing allows"
         for r in self.refinements:
             change = (f"Δmax {r['delta_max_before']:.2e} -> {r['delta_max_after']:.2e} mm"
@@ -528,6 +538,11 @@ class Report:
                                                         "(--max-refinements)")
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
                          f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
+        return lines
+
+    def _g1_lines(self) -> list[str]:
+        """G1's tangent edges, a line each after the count."""
+        lines: list[str] = []
         if self.g1:
             before = max((g["kink_before_max"] for g in self.g1), default=0.0)
             after = max((g["kink_after_max"] for g in self.g1), default=0.0)
@@ -538,6 +553,11 @@ class Report:
                 how = (g.get("method") or "corrected") if g["corrected"] else f"not corrected: {g['reason']}"
                 lines.append(f"  edge {g['edge']} (faces {g['faces'][0]}, {g['faces'][1]}): kink "
                              f"{g['kink_before_max']:.3g}° -> {g['kink_after_max']:.3g}° ({how}){_g2_words(g)}")
+        return lines
+
+    def _closing_lines(self) -> list[str]:
+        """The field's scatter, what is not measured, the inversion, and the overall figures."""
+        lines: list[str] = []
         if self.tolerance is not None and self.allowance > 0.1 * self.tolerance:   # the verdict says how much
             lines.append(f"field's scatter: {self.scatter:.3g} mm about a smooth field, {self.allowance:.3g} mm "
                          f"added to the tolerance at the nodes")
@@ -552,7 +572,7 @@ class Report:
             worst = max((f for f in self.faces if not math.isnan(f.delta_between)), key=lambda f: f.delta_between)
             lines.append(f"between the nodes: Δmax {_num(self.delta_between)} mm (face {worst.index}), against the "
                          f"field's local estimate on a grid over every face")
-        return "\n".join(lines)
+        return lines
 
 
 def _num(x: float) -> str:
