@@ -947,7 +947,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
     return grids
 
 
-def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,  # noqa: C901, PLR0913
+def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,  # noqa: PLR0913
                hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale,
                grids: list[FaceGrid], limit: float = np.inf) -> ColdCheck:
     """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
@@ -969,21 +969,7 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     nearby points of a part stay about as far apart as they were; where two sides of a gap come together,
     their points do not.
     """
-    problems: dict[int, list[str]] = {}
-    for s, (hot, cold) in enumerate(zip(hot_checks, cold_checks)):
-        if hot.volume > 0 and not cold.volume > 0:
-            problems.setdefault(s, []).append(
-                f"is turned inside out (volume hot {hot.volume:.6g} mm³, cold {cold.volume:.6g} mm³)")
-        elif hot.volume > 0:
-            change = cold.volume / hot.volume - 1.0
-            log.info("solid %d: volume hot %.6g mm³, cold %.6g mm³ (%+.3g %%; %.3g %% allowed by the field's "
-                     "largest strain %.3g)", s, hot.volume, cold.volume, 100 * change, 100 * scale.volume_bound,
-                     scale.strain)
-            if abs(change) > scale.volume_bound:
-                problems.setdefault(s, []).append(
-                    f"changes its volume from {hot.volume:.6g} mm³ to {cold.volume:.6g} mm³ ({100 * change:+.3g} %), "
-                    f"more than the {100 * scale.volume_bound:.3g} % the field's largest strain "
-                    f"({scale.strain:.3g}) allows")
+    problems = _volume_problems(hot_checks, cold_checks, scale)
     spacing = CHECK_SPACING * part.diagonal
     hot_points, cold_points = [], []
     farthest = (0.0, -1)
@@ -1006,21 +992,10 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
                     f"leaves the field between the nodes: face {face.index} is {off[k]:.4g} mm from where the "
                     f"field's local estimate puts it near ({', '.join(f'{x:.4g}' for x in hot[k])}) mm, more "
                     f"than {_BETWEEN_MARGIN:g} x the field's largest displacement ({scale.largest:.4g} mm)")
-        over = np.flatnonzero(np.einsum("ij,ij->i", hot_n, cold_n) < 0)    # NaN (no normal) compares False
         moves = np.linalg.norm(cold - hot, axis=1)
         farthest = max(farthest, (float(moves.max()) if len(moves) else 0.0, face.index))
-        if len(moves) and moves.max() > scale.move_bound:
-            k = int(np.argmax(moves))
-            problems.setdefault(face.solid, []).append(
-                f"moves face {face.index} by up to {moves[k]:.4g} mm near "
-                f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, farther than the field moves any node "
-                f"({scale.largest:.4g} mm; up to {_MOVE_MARGIN:g} x that + {scale.reach:.3g} mm accepted)")
-        if len(over):
-            k = over[0]
-            problems.setdefault(face.solid, []).append(
-                f"folds: face {face.index} turns over at {len(over)} of {len(uv)} points, e.g. near "
-                f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, the field moving it by up to {moves.max():.3g} mm "
-                f"(the part is {part.diagonal:.4g} mm across)")
+        for text in _grid_problems(face, (hot, hot_n), (cold, cold_n), scale, part.diagonal):
+            problems.setdefault(face.solid, []).append(text)
     log.info("the cold part moves face %d farthest, by %.4g mm (%.4g mm accepted: the field's largest "
              "displacement %.4g mm)", farthest[1], farthest[0], scale.move_bound, scale.largest)
     closing = closing_pairs(np.concatenate(hot_points), np.concatenate(cold_points), spacing)
@@ -1041,6 +1016,49 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
                  "allows: unmeasured there (most on face %d, %.2g %% of it)", int(np.sum(uncertain > 0)), k,
                  100 * uncertain[k])
     return ColdCheck(problems, between, unmeasured, uncertain)
+
+def _volume_problems(hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale
+                     ) -> dict[int, list[str]]:
+    """Per solid, what its volume says: turned inside out, or changed by more than the field's strain allows."""
+    problems: dict[int, list[str]] = {}
+    for s, (hot, cold) in enumerate(zip(hot_checks, cold_checks)):
+        if hot.volume > 0 and not cold.volume > 0:
+            problems.setdefault(s, []).append(
+                f"is turned inside out (volume hot {hot.volume:.6g} mm³, cold {cold.volume:.6g} mm³)")
+        elif hot.volume > 0:
+            change = cold.volume / hot.volume - 1.0
+            log.info("solid %d: volume hot %.6g mm³, cold %.6g mm³ (%+.3g %%; %.3g %% allowed by the field's "
+                     "largest strain %.3g)", s, hot.volume, cold.volume, 100 * change, 100 * scale.volume_bound,
+                     scale.strain)
+            if abs(change) > scale.volume_bound:
+                problems.setdefault(s, []).append(
+                    f"changes its volume from {hot.volume:.6g} mm³ to {cold.volume:.6g} mm³ ({100 * change:+.3g} %), "
+                    f"more than the {100 * scale.volume_bound:.3g} % the field's largest strain "
+                    f"({scale.strain:.3g}) allows")
+    return problems
+
+
+def _grid_problems(face, hot_grid: tuple[np.ndarray, np.ndarray], cold_grid: tuple[np.ndarray, np.ndarray],
+                   scale: FieldScale, diagonal: float) -> list[str]:
+    """What the grid points of ``face``, hot and cold, say (each a pair of points and normals, ``(m, 3)``): the
+    face moved farther than the field moves any node, or folded over (a cold normal against the hot one)."""
+    (hot, hot_n), (cold, cold_n) = hot_grid, cold_grid
+    problems = []
+    over = np.flatnonzero(np.einsum("ij,ij->i", hot_n, cold_n) < 0)    # NaN (no normal) compares False
+    moves = np.linalg.norm(cold - hot, axis=1)
+    if len(moves) and moves.max() > scale.move_bound:
+        k = int(np.argmax(moves))
+        problems.append(
+            f"moves face {face.index} by up to {moves[k]:.4g} mm near "
+            f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, farther than the field moves any node "
+            f"({scale.largest:.4g} mm; up to {_MOVE_MARGIN:g} x that + {scale.reach:.3g} mm accepted)")
+    if len(over):
+        k = over[0]
+        problems.append(
+            f"folds: face {face.index} turns over at {len(over)} of {len(hot)} points, e.g. near "
+            f"({', '.join(f'{x:.4g}' for x in hot[k])}) mm, the field moving it by up to {moves.max():.3g} mm "
+            f"(the part is {diagonal:.4g} mm across)")
+    return problems
 
 
 def _between(fm: FaceMorph, expected: np.ndarray, uv: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, int]:
