@@ -180,7 +180,7 @@ class MorphContext:
 
     @property
     def fit_inputs(self) -> FitInputs:
-        """What every face fit reads of this context (:class:`~hot2cold.pipeline.face_fit.FitInputs`)."""
+        """What every edge and face fit reads of this context (:class:`~hot2cold.pipeline.fit_inputs.FitInputs`)."""
         return FitInputs(self.classification, self.field, self.vertex_displacements, self.estimator, self.settings,
                          self.trimmed_away, self.noise)
 
