@@ -317,7 +317,6 @@ def _result(job: Job, status: str, exit_code: int | None, message: str = "", del
             "output": str(job.output), "report": None if job.report is None else str(job.report), **more}
 
 
-
 class _Warnings(logging.Handler):
     """The hot2cold warnings of this thread, kept for the job's result (a worker has no terminal)."""
 

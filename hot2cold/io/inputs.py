@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, one_line
 
 
 def _unreadable(what: str, path, reason: str) -> str:
@@ -45,5 +45,4 @@ def read_input_bytes(path: str | os.PathLike, what: str, error: type[InputError]
     except PermissionError:
         raise error(_unreadable(what, os.fspath(path), "permission denied; check its permissions")) from None
     except OSError as exc:
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise error(_unreadable(what, os.fspath(path), reason)) from None
+        raise error(_unreadable(what, os.fspath(path), one_line(exc))) from None
