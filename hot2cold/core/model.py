@@ -235,6 +235,17 @@ class Classification:
         if self.node is None:
             object.__setattr__(self, "node", np.arange(len(self.role)))
 
+    @classmethod
+    def unclaimed(cls, n: int, node_distance: float, edge_distance: float) -> Classification:
+        """``n`` nodes, every one ignored: no owner, no foot point, at an infinite distance (the arrays a
+        classification fills in place as faces, edges and vertices claim the nodes)."""
+        return cls(np.full(n, Role.IGNORED), np.full(n, -1), np.full((n, 2), np.nan), np.full(n, np.nan),
+                   np.full((n, 3), np.nan), np.full(n, np.inf), node_distance, edge_distance)
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """``(role, owner, uv, t, foot, distance)``, the per-node arrays."""
+        return self.role, self.owner, self.uv, self.t, self.foot, self.distance
+
     @property
     def field_nodes(self) -> int:
         """How many nodes the field has (the entries of nodes that feed two solids counted once)."""

@@ -330,28 +330,6 @@ def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, 
     return FootPoints(uv, distance, fp.settled)
 
 
-@dataclass(eq=False)
-class _Rows:
-    """The arrays of :class:`Classification` for ``n`` nodes, filled in place as faces, edges and vertices
-    claim them: role, owner ``(n,)``, uv ``(n, 2)``, t ``(n,)``, foot ``(n, 3)``, distance ``(n,)``."""
-
-    role: np.ndarray
-    owner: np.ndarray
-    uv: np.ndarray
-    t: np.ndarray
-    foot: np.ndarray
-    distance: np.ndarray
-
-    @classmethod
-    def empty(cls, n: int) -> _Rows:
-        """Every node ignored, owned by none, at no foot point."""
-        return cls(np.full(n, Role.IGNORED), np.full(n, -1), np.full((n, 2), np.nan), np.full(n, np.nan),
-                   np.full((n, 3), np.nan), np.full(n, np.inf))
-
-    def arrays(self) -> tuple[np.ndarray, ...]:
-        return self.role, self.owner, self.uv, self.t, self.foot, self.distance
-
-
 @dataclass(frozen=True, eq=False)
 class _Reach:
     """How a group of faces classifies: the part, its boundary's trees, the projector, and the distances (mm)
@@ -365,15 +343,15 @@ class _Reach:
 
 
 def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], starts: Starts,
-                    threads: int = 1) -> _Rows:
+                    threads: int = 1) -> Classification:
     """Classify ``points (N, 3)`` on the faces of the candidate ``pairs`` ``(pair_node, pair_face)`` (each
-    ``(c,)``, sorted by face): the arrays of :class:`Classification` (:class:`_Rows`).  The faces' foot points
+    ``(c,)``, sorted by face): their :class:`Classification`, its arrays filled in place.  The faces' foot points
     are found in up to ``threads`` threads (:func:`~hot2cold.core.threads.map_threads`), then offered to the
     nodes face by face."""
     part, projector, node_distance = reach.part, reach.projector, reach.node
     pair_node, pair_face = pairs
     n = len(points)
-    rows = _Rows.empty(n)
+    rows = Classification.unclaimed(n, reach.node, reach.edge)
     role, owner, uv, foot, distance = rows.role, rows.owner, rows.uv, rows.foot, rows.distance
     best = np.full(n, np.inf)
 
@@ -449,7 +427,7 @@ class _Boundary:
         return cls(vertices, cKDTree(np.concatenate(samples)), np.concatenate(sample_edge), h)
 
 
-def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: _Rows, candidates: np.ndarray,
+def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classification, candidates: np.ndarray,
                               faces: np.ndarray) -> None:
     """Re-assign face nodes of ``points (N, 3)`` that lie on a vertex or an edge of their face, and give the
     ``candidates`` (node indices ``(c,)``) no face took to a vertex or edge of ``faces`` (face indices, the
