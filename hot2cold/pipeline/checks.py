@@ -616,7 +616,7 @@ class FaceGrid:
     hot : (m, 3) float array, the hot surface there (mm).
     expected : (m, 3) float array, ``hot`` moved by the field's local estimate: where the cold face should
         pass, as far as the nodes tell.
-    near : (m,) bool array, the points near the face's own nodes (:func:`face_grids`), where the nodes tell
+    near : (m,) bool array, the points near the face's own nodes (:class:`FaceGridder`), where the nodes tell
         the field on the face.
     node_distance : (m,) float array, each point's distance (mm) to the nearest node of the face, its edges
         and its vertices (inf where they have none).
@@ -759,7 +759,7 @@ class _FaceNodes:
 
 
 class FaceNodes:
-    """What :func:`face_grids` finds of each face's nodes, kept for one classification and field across its
+    """What :class:`FaceGridder` finds of each face's nodes, kept for one classification and field across its
     calls: the refinement asks for the grids of a face again after every round, and the nodes, their tree, the
     local estimate and its misses at the nodes do not depend on the face's knots."""
 
@@ -798,73 +798,70 @@ class FaceGridder:
     threads: int = 1
 
     def __call__(self, part: Part, faces: list[int] | None = None, slack: bool = True) -> list[FaceGrid]:
-        return face_grids(part, self, faces, slack)
+        """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the part's
+        diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs its own
+        grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined 2x2 -> 5x5 was
+        7.8e-4 mm off the field on the grid of its bilinear surface, 1.9e-3 between).
+
+        On a face with at least ``_FACE_ESTIMATE_MIN`` nodes of its own, the points near its nodes (those of the face,
+        its edges and its vertices; within ``GRID_REACH`` times their spacing, ``Classification.spacing``, which is
+        that of the field around them: a plane with nodes only at its corners is near them only next to the corners,
+        not across its 150 mm, where the estimate was 0.014 mm off on the vise) are moved by a
+        :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (the gridder's ``face_nodes``); the
+        others by the gridder's ``estimator`` (over every node).  A thin wall's two sides are nearer each other than
+        the nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
+        segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and where its
+        nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the estimate over
+        every node, which has nodes all around, is the better one.  With ``elements`` (the gridder's: a field that
+        brings its FE elements, :class:`~hot2cold.pipeline.artificial.ElementField`), the points on the FE model's
+        boundary take the elements' own field instead, and all of them are near the nodes: the elements say where the
+        part goes between them (the slack there: their distance off the boundary times the strain). The hot surfaces'
+        parameters stay valid through the refinement to a tolerance (knot insertion and degree elevation keep the
+        surface), so one set of grids serves it and the checks of the cold part. The faces are gridded in up to the
+        gridder's ``threads`` threads.  ``slack=False``: the slack of the points near the face's own nodes is left NaN
+        (G1's trial refinement measures distances from ``expected`` only, and most trials are not taken;
+        :func:`with_slack` finds it later): 78 % of the time of the grid of Rotor 37's largest face with 1 M nodes."""
+        face_nodes, projector = self.face_nodes, self.projector
+        estimator, elements = self.estimator, self.elements
+        find_slack = slack                   # (the grid's ``slack`` array below is another thing)
+        spacing = CHECK_SPACING * part.diagonal
+        overall = GRID_REACH * face_nodes.classification.spacing()
+
+        def grid(face) -> FaceGrid:
+            uv = face_grid(face, spacing, projector)
+            hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
+            expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
+            uncertainty = np.zeros(len(uv))
+            node_distance = np.full(len(uv), np.inf)
+            own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
+            mine = face_nodes.of(part, face)
+            reach = mine.reach
+            if len(uv) and len(mine.nodes) and np.isfinite(reach):
+                node_distance = mine.tree.query(hot, workers=-1)[0]
+                near = node_distance <= reach
+                if near.any() and mine.own:
+                    own = near
+                    expected[near] += mine.local(hot[near])
+                    slack[near] = mine.slack(hot[near]) if find_slack else np.nan
+                    uncertainty[near] = mine.uncertainty(hot[near]) if find_slack else np.nan
+            if (~own).any():
+                expected[~own] += estimator(hot[~own])
+            if elements is not None and len(uv):
+                on, disp, slack_on = elements(hot)
+                expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
+                uncertainty[on] = slack_on
+            support = max(reach, overall) if np.isfinite(reach) else overall
+            return FaceGrid(uv, hot, expected, slack, near, node_distance, support, uncertainty)
+
+        chosen = part.faces if faces is None else [part.faces[k] for k in faces]
+        mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
+        return map_threads(grid, chosen, self.threads, cost=[len(m.nodes) for m in mine])
 
 
-def face_grids(part: Part, gridder: FaceGridder, faces: list[int] | None = None, with_slack: bool = True
-               ) -> list[FaceGrid]:
-    """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the
-    part's diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs
-    its own grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined
-    2x2 -> 5x5 was 7.8e-4 mm off the field on the grid of its bilinear surface, 1.9e-3 between).
-
-    On a face with at least ``_FACE_ESTIMATE_MIN`` nodes of its own, the points near its nodes (those of the
-    face, its edges and its vertices; within ``GRID_REACH`` times their spacing, ``Classification.spacing``,
-    which is that of the field around them: a plane with nodes only at its corners is near them only next to
-    the corners, not across its 150 mm, where the estimate was 0.014 mm off on the vise) are moved by a
-    :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (the gridder's ``face_nodes``); the
-    others by the gridder's ``estimator`` (over every node).  A thin wall's two sides are nearer each other than
-    the nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
-    segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and
-    where its nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the
-    estimate over every node, which has nodes all around, is the better one.  With ``elements`` (the gridder's: a field
-    that brings its FE elements, :class:`~hot2cold.pipeline.artificial.ElementField`), the points on the FE
-    model's boundary take the elements' own field instead, and all of them are near the nodes: the elements
-    say where the part goes between them (the slack there: their distance off the boundary times the strain).
-    The hot surfaces' parameters stay valid through the refinement to a tolerance (knot insertion and degree
-    elevation keep the surface), so one set of grids serves it and the checks of the cold part.
-    The faces are gridded in up to the gridder's ``threads`` threads.  ``with_slack=False``: the slack of
-    the points near the face's own nodes is left NaN (G1's trial refinement measures distances from
-    ``expected`` only, and most trials are not taken; :func:`with_slack` finds it later): 78 % of the time of
-    the grid of Rotor 37's largest face with 1 M nodes."""
-    face_nodes, projector = gridder.face_nodes, gridder.projector
-    estimator, elements = gridder.estimator, gridder.elements
-    spacing = CHECK_SPACING * part.diagonal
-    overall = GRID_REACH * face_nodes.classification.spacing()
-
-    def grid(face) -> FaceGrid:
-        uv = face_grid(face, spacing, projector)
-        hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
-        expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
-        uncertainty = np.zeros(len(uv))
-        node_distance = np.full(len(uv), np.inf)
-        own = np.zeros(len(uv), bool)                    # the points the face's own estimate moves
-        mine = face_nodes.of(part, face)
-        reach = mine.reach
-        if len(uv) and len(mine.nodes) and np.isfinite(reach):
-            node_distance = mine.tree.query(hot, workers=-1)[0]
-            near = node_distance <= reach
-            if near.any() and mine.own:
-                own = near
-                expected[near] += mine.local(hot[near])
-                slack[near] = mine.slack(hot[near]) if with_slack else np.nan
-                uncertainty[near] = mine.uncertainty(hot[near]) if with_slack else np.nan
-        if (~own).any():
-            expected[~own] += estimator(hot[~own])
-        if elements is not None and len(uv):
-            on, disp, slack_on = elements(hot)
-            expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
-            uncertainty[on] = slack_on
-        support = max(reach, overall) if np.isfinite(reach) else overall
-        return FaceGrid(uv, hot, expected, slack, near, node_distance, support, uncertainty)
-
-    chosen = part.faces if faces is None else [part.faces[k] for k in faces]
-    mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
-    return map_threads(grid, chosen, gridder.threads, cost=[len(m.nodes) for m in mine])
 
 
 def with_slack(part: Part, grids: list[FaceGrid], face_nodes: FaceNodes, threads: int = 1) -> list[FaceGrid]:
-    """``grids`` (one per face of ``part``) with the slack :func:`face_grids` left out (``with_slack=False``,
+    """``grids`` (one per face of ``part``) with the slack a :class:`FaceGridder` left out (``slack=False``,
     NaN) found, from the same ``face_nodes``; the others as they are."""
     def fill(k: int) -> FaceGrid:
         grid = grids[k]
@@ -959,7 +956,7 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     ``scale.between_bound`` from where the field's local estimate puts it: the nodes say where the part goes,
     and a face that wanders off between them is wrong however close it passes the nodes), or crossing itself.
     ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid; ``grids`` are the
-    :func:`face_grids` of ``part``; ``limit`` (mm), the tolerance plus the field's scatter allowance, against
+    grids of ``part`` (:class:`FaceGridder`); ``limit`` (mm), the tolerance plus the field's scatter allowance, against
     which the share of each face's grid left unmeasured is found (:meth:`FaceGrid.unmeasured`).
 
     The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
