@@ -300,6 +300,7 @@ class FaceErrors(NamedTuple):
 
 
 def _largest(err: np.ndarray) -> float:
+    """The largest of ``err`` (0 when empty)."""
     return float(err.max()) if len(err) else 0.0
 
 
@@ -707,8 +708,8 @@ class _Refining:
 
     def _bad(self) -> tuple[list[int], list[int]]:
         limit = self.targets.limit
-        return ([k for k, e in enumerate(self.face_err) if _worst(e.error) > limit],
-                [k for k, e in enumerate(self.edge_err) if _worst(e.error) > limit])
+        return ([k for k, e in enumerate(self.face_err) if _largest(e.error) > limit],
+                [k for k, e in enumerate(self.edge_err) if _largest(e.error) > limit])
 
     def missing(self) -> bool:
         """Whether a face or an edge still misses the limit (if none does, none is stuck either)."""
@@ -784,7 +785,7 @@ class _Refining:
             self.edge_err[e] = self._edge_errors(e)
         log.info("refinement round %d: %d faces and %d edges refined; largest error %.3g mm", self.rounds,
                  len(inserted.faces), len(inserted.edges),
-                 max([_worst(e.error) for e in self.face_err] + [_worst(e.error) for e in self.edge_err] + [0.0]))
+                 max([_largest(e.error) for e in self.face_err] + [_largest(e.error) for e in self.edge_err] + [0.0]))
 
     def result(self) -> RefineResult:
         return RefineResult(self.part, self.faces, self.edges, self._face_reports(), self._edge_reports(),
@@ -795,7 +796,7 @@ class _Refining:
         part, limit = self.part, self.targets.limit
         reported = [k for k in range(len(part.faces)) if max(self.face_before[k]) > limit or self.face_rounds[k]]
         residual = dict(zip(reported, map_threads(
-            lambda k: _worst(node_residuals(part.faces[k], self.faces[k], self.cls, self.field)), reported,
+            lambda k: _largest(node_residuals(part.faces[k], self.faces[k], self.cls, self.field)), reported,
             self.refitter.threads, cost=self.sizes[reported])))
         out = []
         for k in reported:
@@ -804,7 +805,7 @@ class _Refining:
             unresolved = int(np.count_nonzero(self.stalled[k] & (err.error[:len(self.stalled[k])] > limit)))
             out.append(Refinement(
                 face=k, missed=max(self.face_before[k]) > limit,
-                refinable=not ((k in self.stuck_faces or unresolved) and _worst(err.error) > limit),
+                refinable=not ((k in self.stuck_faces or unresolved) and _largest(err.error) > limit),
                 knots_added_u=int(self.face_added[k, 0]), knots_added_v=int(self.face_added[k, 1]),
                 degree_before=f"{s0.u_degree}x{s0.v_degree}", degree_after=f"{s1.u_degree}x{s1.v_degree}",
                 net_before="x".join(map(str, s0.shape)), net_after="x".join(map(str, s1.shape)),
@@ -823,17 +824,12 @@ class _Refining:
                 continue
             err = self.edge_err[e]
             out.append(EdgeRefinement(
-                edge=e, missed=missed, refinable=not (e in self.stuck_edges and _worst(err.error) > limit),
+                edge=e, missed=missed, refinable=not (e in self.stuck_edges and _largest(err.error) > limit),
                 knots_added=int(self.edge_added[e]), degree_before=hot.curve.degree,
                 degree_after=edge.curve.degree, poles_before=hot.curve.n_poles, poles_after=edge.curve.n_poles,
                 rounds=int(self.edge_rounds[e]), delta_max_before=self.edge_before[e][0],
                 delta_max_after=err.nodes, between_before=self.edge_before[e][1], between_after=err.between))
         return out
-
-
-def _worst(err: np.ndarray) -> float:
-    """The largest of ``err`` (0 when empty)."""
-    return float(err.max()) if len(err) else 0.0
 
 
 @dataclass(eq=False)
