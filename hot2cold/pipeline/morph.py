@@ -826,14 +826,17 @@ class _Refined:
 
 
 def _refine(context: MorphContext, classified: _Classified, faces: list[FaceMorph], edges: list[EdgeMorph],
-            regrid: FaceGridder) -> _Refined:
+            regrid: FaceGridder, stages: _Stages) -> _Refined:
     """Refine the fits to the tolerance (beyond the paper; not with ``keep_knots``): knots and cubic degree
     where the error at the nodes or between them misses it (:func:`~hot2cold.pipeline.refine.refine`); then
-    the grids of every face on its final knots (a face refined without them never needed one before)."""
+    the grids of every face on its final knots (a face refined without them never needed one before); the
+    stage ``refine`` timed where the refinement runs."""
     settings, cls, field = context.settings, classified.classification, classified.field
     made: dict[int, FaceGrid] = {}      # grids of the faces the refinement measures on them, then of every face
     refined = None
-    if settings.tolerance is not None and not settings.keep_knots:
+    refining = settings.tolerance is not None and not settings.keep_knots
+    if refining:
+        stages.begin("refine")
         measured = Targets.measured_faces(context.part, cls)
         made.update(zip(measured, regrid(context.part, measured)))
         targets = Targets.of(context.part, cls, TARGET_SHARE * settings.tolerance + classified.allowance, made,
@@ -848,6 +851,8 @@ def _refine(context: MorphContext, classified: _Classified, faces: list[FaceMorp
     missing = [k for k in range(len(context.part.faces)) if k not in made]
     made.update(zip(missing, regrid(context.part, missing) if missing else []))
     grids = [made[k] for k in range(len(context.part.faces))]
+    if refining:
+        stages.lap("refine")
     if refined is None:
         return _Refined(context, faces, edges, grids)
     return _Refined(context, faces, edges, grids, tuple(refined.face_refinements),
@@ -989,12 +994,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
 
     # refinement to the tolerance (beyond the paper): from here on the context's part is the refined hot part
     regrid = _gridder(context, classified)
-    refining = settings.tolerance is not None and not settings.keep_knots
-    if refining:
-        stages.begin("refine")
-    refined = _refine(context, classified, face_morphs, edge_morphs, regrid)
-    if refining:
-        stages.lap("refine")
+    refined = _refine(context, classified, face_morphs, edge_morphs, regrid, stages)
     context = refined.context
 
     # G1 and G2 along the tangent edges, then rebuild, sew and check, then the report
