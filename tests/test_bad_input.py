@@ -760,7 +760,7 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.validity import check_solids
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, FieldScale, check_cold
+    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, FieldScale, Rebuilt, check_cold
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -768,9 +768,10 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     used = cls.used
     estimator = FieldEstimator(cls.foot[used], result.field.displacements[used])
     projector = Projector(part.kernel.faces, part.kernel.edges)
-    args = (projector, check_solids(part.kernel.hot), check_solids(result.cold_kernel.shape),
-            FieldScale.of(cls, result.field), FaceGridder(projector, FaceNodes(cls, result.field, 20), estimator)(part))
-    fine = check_cold(part, result.cold_kernel, result.faces, *args)
+    solids = (check_solids(part.kernel.hot), check_solids(result.cold_kernel.shape))
+    args = (projector, FieldScale.of(cls, result.field), FaceGridder(projector, FaceNodes(cls, result.field, 20),
+                                                                       estimator)(part))
+    fine = check_cold(part, Rebuilt(result.cold_kernel, result.faces, *solids), *args)
     assert fine.problems == {}
     assert np.nanmax(fine.between) < 1e-9
     top = max(range(len(part.faces)), key=lambda k: part.faces[k].surface.poles[..., 2].min())
@@ -782,13 +783,13 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     poles[1, 1, 2] += 1.0
     faces = list(result.faces)
     faces[top] = replace(faces[top], surface=surface.with_poles(poles))
-    bumped = check_cold(part, result.cold_kernel, faces, *args)
+    bumped = check_cold(part, Rebuilt(result.cold_kernel, faces, *solids), *args)
     assert 0.9 < bumped.between[top] <= 1.0       # the distance to a tent 1 mm high over 5 mm: 0.98 at its top
     assert np.nanmax(np.delete(bumped.between, top)) < 1e-9
     assert any(p.startswith(f"leaves the field between the nodes: face {top} is 0.9") for p in bumped.problems[0])
     # the bump also moves the face farther than the field moves any node (0.3 mm, 1.5 x that + the node
     # distance accepted): the README's row of that message
-    scale = args[3]
+    scale = args[1]
     assert 0.2 < scale.largest < 0.4 and scale.move_bound < 0.9
     assert any(re.match(rf"moves face {top} by up to 1\.\d+ mm near \(.*\) mm, farther than the field moves any "
                         rf"node \(0\.\d+ mm; up to 1\.5 x that \+ 0\.\d+ mm accepted\)$", p)

@@ -361,12 +361,12 @@ def test_filleted_block_under_a_stronger_field_is_refined_along_the_edges_its_ne
     (0.0113 deg; a torus's 3x3 net has one free pole for its four sides): the faces along them are refined
     and corrected again, and every edge ends within 0.01 deg, no farther from the field than G1 without the
     refinement (measured: Δmax 2.26e-4 mm without, 1.20e-4 with; 7.5e-5 without G1 at all, see the note)."""
-    import hot2cold.pipeline.morph as pipeline_morph
+    import hot2cold.pipeline.continuity as continuity
     from hot2cold.pipeline.morph import morph
     field = _untwist(block_nodes, 0.05, 1e-4)
     data = (block_nodes, field(block_nodes))
     result = morph(block_shape, data)
-    monkeypatch.setattr(pipeline_morph, "_G1_REFINEMENTS", 0)
+    monkeypatch.setattr(continuity, "_G1_REFINEMENTS", 0)
     unrefined = morph(block_shape, data)
     before = unrefined.report.g1
     assert sum(g["kink_after_max"] - g["hot_angle_max"] > 0.01 for g in before) == 2
@@ -583,7 +583,8 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     from hot2cold.pipeline.face_fit import morph_face
     from hot2cold.pipeline.fit_inputs import FitInputs
     from hot2cold.pipeline.g1 import TURN_WEIGHT, turn_rows
-    from hot2cold.pipeline.morph import MorphContext, morph
+    from hot2cold.pipeline.context import MorphContext
+    from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
 
     result = morph(block_shape, (block_nodes, _untwist(block_nodes, 0.05, 1e-4)(block_nodes)))

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 from hot2cold.pipeline.artificial import FieldEstimator, carry_to_feet
 from hot2cold.core.bspline import BSplineCurve, BSplineSurface, curve_basis, evaluate_curve
-from hot2cold.pipeline.edge_fit import morph_edge
+from hot2cold.pipeline.edge_fit import EdgeFitOptions, morph_edge
 from hot2cold.pipeline.face_fit import _artificial_parameters
 from hot2cold.core.model import EdgeUse, side_along
 
@@ -37,7 +37,7 @@ def test_edge_morph_reproduces_an_affine_field(rational):
     hot = evaluate_curve(curve, t)
     disp = hot @ A.T + B - hot
     ends = curve.poles[[0, -1]] @ A.T + B - curve.poles[[0, -1]]
-    result = morph_edge(curve, t, disp, ends, None, 1.2e-7)
+    result = morph_edge(curve, t, disp, ends, EdgeFitOptions(None, 1.2e-7))
     assert np.abs(result.curve.poles - (curve.poles @ A.T + B)).max() <= 1e-10
     assert result.rank == result.unknowns == curve.n_poles - 2
     # the end poles are exactly the vertex displacements (eq. 10)
@@ -53,7 +53,7 @@ def test_edge_morph_fills_empty_knot_spans_from_the_estimator():
     ends = curve.poles[[0, -1]] @ A.T + B - curve.poles[[0, -1]]
     samples = evaluate_curve(curve, np.linspace(*curve.domain, 400))
     estimator = FieldEstimator(samples, samples @ A.T + B - samples)
-    result = morph_edge(curve, t, disp, ends, estimator, 1.2e-7)
+    result = morph_edge(curve, t, disp, ends, EdgeFitOptions(estimator, 1.2e-7))
     assert result.artificial == (len(breaks) - 3) * (curve.degree + 1)   # degree + 1 in each empty span
     assert np.abs(result.curve.poles - (curve.poles @ A.T + B)).max() <= 1e-8
 
@@ -83,7 +83,8 @@ def test_edge_morph_of_a_high_degree_span_with_its_nodes_bunched_at_one_end():
     # the default cut-off keeps every pole (condition 9e4); a coarse one (1e-3) drops 8 of 15 directions, which
     # then keep the estimate fitted along the curve (0.7 x the best; with the estimate at the poles, 6.6 x)
     for epsilon, full in ((1.2e-7, True), (1e-3, False)):
-        result = morph_edge(curve, t, _quadratic_field(hot), ends, estimator, epsilon, artificial_weight=0.1)
+        result = morph_edge(curve, t, _quadratic_field(hot), ends,
+                            EdgeFitOptions(estimator, epsilon, artificial_weight=0.1))
         assert result.artificial > 0 and (result.rank == result.unknowns) == full
         off = np.linalg.norm(evaluate_curve(result.curve, dense) - on - _quadratic_field(on), axis=1)
         assert off.max() <= 2.0 * best_off.max(), (epsilon, off.max(), best_off.max())

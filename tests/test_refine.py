@@ -517,7 +517,7 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
     from hot2cold.core.model import Role
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.checks import FaceGrid
-    from hot2cold.pipeline.morph import MorphContext
+    from hot2cold.pipeline.context import MorphContext
 
     shape, nodes = blade_1mm
     result = morph(shape, (nodes, _bend(2e-4)(nodes)))
@@ -533,9 +533,9 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
     u0, u1, v0, v1 = surface.domain
     normal = surface_normals(surface, np.array([(u0 + u1) / 2]), np.array([(v0 + v1) / 2]))[0]
     for shift, refused in ((2e-6, False), (5e-3, True)):
-        why = context._edge_moved_off(e, fit, replace(fit.curve, poles=fit.curve.poles + shift * across))
+        why = context.distances.edge_moved_off(e, fit, replace(fit.curve, poles=fit.curve.poles + shift * across))
         assert bool(why) == refused and (not refused or why.startswith(f"turning edge {e} would take it 0.00"))
-        why = context._moved_off(k, surface, surface.with_poles(surface.poles + shift * normal), grid)
+        why = context.distances.moved_off(k, surface, surface.with_poles(surface.poles + shift * normal), grid)
         assert bool(why) == refused and (not refused or why.startswith(f"turning face {k} would take it 0.00"))
 
 

@@ -944,10 +944,26 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
     return grids
 
 
-def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph], projector: Projector,  # noqa: PLR0913
-               hot_checks: list[SolidCheck], cold_checks: list[SolidCheck], scale: FieldScale,
-               grids: list[FaceGrid], limit: float = np.inf) -> ColdCheck:
-    """What is wrong with the cold part ``cold_kernel`` (the hot ``part`` rebuilt with ``face_morphs``), per
+@dataclass(frozen=True, eq=False)
+class Rebuilt:
+    """A cold part as rebuilt, what :func:`check_cold` reads of it.
+
+    Attributes
+    ----------
+    kernel : ColdKernel, the cold geometry in a copy of the hot part's kernel shape.
+    faces : list of FaceMorph, one per face of the hot part, the cold surfaces.
+    hot_checks, cold_checks : one :class:`SolidCheck` per hot and per cold solid.
+    """
+
+    kernel: ColdKernel
+    faces: list[FaceMorph]
+    hot_checks: list[SolidCheck]
+    cold_checks: list[SolidCheck]
+
+
+def check_cold(part: Part, rebuilt: Rebuilt, projector: Projector, scale: FieldScale, grids: list[FaceGrid],
+               limit: float = np.inf) -> ColdCheck:
+    """What is wrong with the cold part (the hot ``part`` ``rebuilt`` with its faces' morphs), per
     solid: turned inside out (its volume changed sign), its volume changed by more than the field's strain
     allows (``scale.volume_bound``), a face folded over (somewhere on a grid over its trimmed domain the
     normal ``S_u x S_v`` of the cold surface points against the hot one's), a face moved farther than the
@@ -955,7 +971,7 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     face away from the field between the nodes (a point of that grid farther from the cold face than
     ``scale.between_bound`` from where the field's local estimate puts it: the nodes say where the part goes,
     and a face that wanders off between them is wrong however close it passes the nodes), or crossing itself.
-    ``hot_checks`` and ``cold_checks`` hold one :class:`SolidCheck` per solid; ``grids`` are the
+    ``grids`` are the
     grids of ``part`` (:class:`FaceGridder`); ``limit`` (mm), the tolerance plus the field's scatter allowance, against
     which the share of each face's grid left unmeasured is found (:meth:`FaceGrid.unmeasured`).
 
@@ -966,13 +982,13 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     nearby points of a part stay about as far apart as they were; where two sides of a gap come together,
     their points do not.
     """
-    problems = _volume_problems(hot_checks, cold_checks, scale)
+    problems = _volume_problems(rebuilt.hot_checks, rebuilt.cold_checks, scale)
     spacing = CHECK_SPACING * part.diagonal
     hot_points, cold_points = [], []
     farthest = (0.0, -1)
     between = np.full(len(part.faces), np.nan)
     unmeasured, uncertain = np.full(len(part.faces), np.nan), np.full(len(part.faces), np.nan)
-    for face, fm, grid in zip(part.faces, face_morphs, grids):
+    for face, fm, grid in zip(part.faces, rebuilt.faces, grids):
         uv = grid.uv
         (hot, hot_n), (cold, cold_n) = _points_and_normals(face.surface, fm.surface, uv)
         hot_points.append(hot)
@@ -999,7 +1015,7 @@ def check_cold(part: Part, cold_kernel: ColdKernel, face_morphs: list[FaceMorph]
     if closing:
         log.info("%d pairs of points came closer than half their hot distance: checking the cold part for "
                  "self-intersection", closing)
-        _check_crossing(part, cold_kernel, problems)
+        _check_crossing(part, rebuilt.kernel, problems)
     if np.isfinite(between).any():
         k = int(np.nanargmax(between))
         log.info("between the nodes the cold part is at most %.3g mm (face %d) from the field's local estimate",

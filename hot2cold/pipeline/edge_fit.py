@@ -24,6 +24,7 @@ from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
 from ..core.model import Classification, Edge, Part, Role
 from .fit_inputs import FitInputs
+from ..settings import FLT_EPSILON
 
 log = logging.getLogger(__name__)
 
@@ -104,22 +105,46 @@ def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEsti
     return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=estimator(curve.poles[1:-1])).x
 
 
-def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,  # noqa: PLR0913
-               estimator: FieldEstimator | None, epsilon: float, index: int = -1,
-               artificial_weight: float = 1.0, noise: float = 0.0) -> EdgeMorph:
-    """Morph one clamped curve.
+@dataclass(frozen=True)
+class EdgeFitOptions:
+    """How an edge is fitted (:func:`morph_edge`).
+
+    Attributes
+    ----------
+    estimator : FieldEstimator or None, gives artificial nodes in knot spans with too few nodes (None: none are
+        added, and the fit has no prior).
+    epsilon : float, machine-precision factor of the SVD cut-off (eq. 20).
+    artificial_weight : float, weight of the artificial nodes' rows against the FE nodes' (1).
+    noise : float, the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit is
+        smoothed towards the field's estimate until it leaves that much at the nodes
+        (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    """
+
+    estimator: FieldEstimator | None = None
+    epsilon: float = FLT_EPSILON
+    artificial_weight: float = 1.0
+    noise: float = 0.0
+
+    @classmethod
+    def of(cls, inputs: FitInputs) -> EdgeFitOptions:
+        """The options of a morph's edge fits: its estimator, settings and noise."""
+        return cls(inputs.estimator, inputs.settings.svd_epsilon, inputs.settings.artificial_weight, inputs.noise)
+
+
+def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: np.ndarray,
+               options: EdgeFitOptions = EdgeFitOptions(), index: int = -1) -> EdgeMorph:
+    """Morph one clamped curve (eq. 10-20).
 
     Parameters
     ----------
     curve : the hot curve, n poles.
     t : (s,) foot-point parameters of the edge's nodes; disp : (s, 3) their displacements.
     end_disp : (2, 3) displacements of the start and end vertex (eq. 10).
-    estimator : gives artificial nodes in knot spans with too few nodes (None: none are added).
-    epsilon : machine-precision factor of the SVD cut-off (eq. 20).
-    artificial_weight : weight of the artificial nodes' rows against the FE nodes' (1).
-    noise : the field's scatter (mm per component, :func:`hot2cold.core.localfit.scatter`): the fit is smoothed
-        towards the field's estimate until it leaves that much at the nodes (:func:`~hot2cold.core.lstsq.solve_tsvd`).
+    options : EdgeFitOptions, the estimator of artificial nodes, the SVD cut-off, their weight, the noise.
+    index : the edge's index, for the record.
     """
+    estimator, epsilon, artificial_weight, noise = (options.estimator, options.epsilon, options.artificial_weight,
+                                                    options.noise)
     n = curve.n_poles
     delta = np.zeros((n, 3))
     delta[0], delta[-1] = end_disp
@@ -149,18 +174,20 @@ def morph_edge(curve: BSplineCurve, t: np.ndarray, disp: np.ndarray, end_disp: n
                      max(n - 2, 0), rank, condition)
 
 
+def fit_edge(part: Part, edge: Edge, inputs: FitInputs) -> EdgeMorph:
+    """Morph ``edge`` of ``part`` (:func:`morph_edge`) from its nodes, its ends' displacements and the estimate,
+    settings and noise of ``inputs``; a degenerate edge is carried as a None curve."""
+    if edge.degenerate:
+        return EdgeMorph(edge.index, None, 0, 0, 0, 0, float("nan"))
+    nodes = inputs.cls.nodes_of(Role.EDGE, edge.index)
+    return morph_edge(edge.curve, inputs.cls.t[nodes], inputs.field.displacements[nodes],
+                      end_displacements(part, edge, inputs.vertex_disp, inputs.estimator), EdgeFitOptions.of(inputs),
+                      edge.index)
+
+
 def morph_edges(part: Part, inputs: FitInputs) -> list[EdgeMorph]:
     """Morph every edge of ``part`` once (degenerate edges are carried as None curves), from the nodes,
-    estimate, settings and noise of ``inputs`` (:func:`morph_edge`)."""
-    cls, field, settings, estimator = inputs.cls, inputs.field, inputs.settings, inputs.estimator
-    out = []
-    for edge in part.edges:
-        if edge.degenerate:
-            out.append(EdgeMorph(edge.index, None, 0, 0, 0, 0, float("nan")))
-            continue
-        nodes = cls.nodes_of(Role.EDGE, edge.index)
-        out.append(morph_edge(edge.curve, cls.t[nodes], field.displacements[nodes],
-                              end_displacements(part, edge, inputs.vertex_disp, estimator), estimator,
-                              settings.svd_epsilon, edge.index, settings.artificial_weight, inputs.noise))
+    estimate, settings and noise of ``inputs`` (:func:`fit_edge`)."""
+    out = [fit_edge(part, edge, inputs) for edge in part.edges]
     log.info("morphed %d edges", len(out))
     return out

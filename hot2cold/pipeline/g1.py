@@ -246,6 +246,10 @@ def kink_maxima(part: Part, surfaces: list[BSplineSurface], edges: list[TangentE
     return out
 
 
+#: A kink (degrees) the morph adds below this is rounding: such edges are left as they are.
+KINK_NOISE_DEG = 1e-6
+
+
 def kink_bound(hot_angle: float, noise_deg: float, strain: float) -> float:
     """The largest angle (degrees) the morph may add to a hot angle ``hot_angle`` between tangent faces (along an
     edge or at a corner) and leave alone: rounding (``noise_deg``) plus what a field of largest strain

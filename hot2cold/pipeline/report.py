@@ -27,7 +27,7 @@ from .checks import GRID_REACH
 
 
 class Morphed(Protocol):
-    """What :func:`build_report` reads of a morph (:class:`~hot2cold.pipeline.morph.MorphContext` has it): the
+    """What :func:`build_report` reads of a morph (:class:`~hot2cold.pipeline.context.MorphContext` has it): the
     (refined) part, the classification of the field's nodes, the field and the settings."""
 
     part: Part
