@@ -449,16 +449,16 @@ def test_turn_rows_ask_nothing_of_faces_that_meet_tangentially():
     """:func:`~hot2cold.pipeline.g1.turn_rows` of two faces that are tangent along their trimming curve ask
     for the pole displacements they have (rows times displacements equal the targets); an edge on a side of
     the face gets no rows (the second rows turn it)."""
-    from hot2cold.pipeline.g1 import turn_rows
+    from hot2cold.pipeline.g1 import Neighbours, turn_rows
 
     part, surface, _ = _split_along_diagonal(0.0)
     moved = surface.with_poles(surface.poles + np.array([0.01, -0.02, 0.03]))      # both moved alike
     edges = [TangentEdge(0, (0, 1), (None, None), 0.0)]
-    rows, targets = turn_rows(part, [moved, moved], edges, 0, 10.0)
+    rows, targets = turn_rows(Neighbours(part, [moved, moved]), edges, 0, 10.0)
     assert rows.shape == (2 * 2 * (5 + 6), 30) and targets.shape == (rows.shape[0], 3)
     assert np.abs(rows @ (moved.poles - surface.poles).reshape(-1, 3) - targets).max() < 1e-12
     on_side = [TangentEdge(0, (0, 1), (("u1", False), None), 0.0)]
-    assert turn_rows(part, [moved, moved], on_side, 0, 10.0)[0].shape == (0, 30)
+    assert turn_rows(Neighbours(part, [moved, moved]), on_side, 0, 10.0)[0].shape == (0, 30)
 
 
 def test_turn_rows_turn_a_kinked_trimming_curve_into_one_plane():
@@ -468,7 +468,7 @@ def test_turn_rows_turn_a_kinked_trimming_curve_into_one_plane():
     are) and on the curve to 1e-7 mm (eq. 65 keeps both tangents' parts in the plane, which holding the
     curve does not quite allow as they turn: 2.3e-8 mm here, with the curve held 1000 times as hard)."""
     from hot2cold.core.bspline import surface_basis
-    from hot2cold.pipeline.g1 import turn_rows
+    from hot2cold.pipeline.g1 import Neighbours, turn_rows
 
     part, surface, kinked = _split_along_diagonal(0.02)
     dense = np.linspace(0.05, 0.95, 400)
@@ -478,7 +478,7 @@ def test_turn_rows_turn_a_kinked_trimming_curve_into_one_plane():
     cold = [surface, kinked]
     turned = []
     for k in (0, 1):
-        rows, targets = turn_rows(part, cold, edges, k, 10.0)
+        rows, targets = turn_rows(Neighbours(part, cold), edges, k, 10.0)
         rows = rows.toarray()
         hold = surface_basis(surface, dense[:, 0], dense[:, 1]).toarray()
         current = (cold[k].poles - surface.poles).reshape(-1, 3)
@@ -582,7 +582,7 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.face_fit import morph_face
     from hot2cold.pipeline.fit_inputs import FitInputs
-    from hot2cold.pipeline.g1 import TURN_WEIGHT, turn_rows
+    from hot2cold.pipeline.g1 import TURN_WEIGHT, Neighbours, turn_rows
     from hot2cold.pipeline.context import MorphContext
     from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
@@ -594,7 +594,7 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     te = context.tangent[0]
     k = te.faces[0]
     surfaces = [f.surface for f in result.faces]
-    rows, targets = turn_rows(part, surfaces, [te], k, TURN_WEIGHT, sides=True)
+    rows, targets = turn_rows(Neighbours(part, surfaces), [te], k, TURN_WEIGHT, sides=True)
     assert rows.shape[0] > 0
     face, edges = part.faces[k], list(result.edges)
     for scale in (1.0, 2.0, 0.5):

@@ -23,7 +23,7 @@ from .distance import FieldDistance
 from .edge_fit import EdgeMorph, fit_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from .fit_inputs import FitInputs
-from .g1 import KINK_NOISE_DEG, CornerReport, TangentEdge, correct_corners, edge_decided, tangent_edges
+from .g1 import CornerReport, TangentEdge, correct_corners, edge_decided, tangent_edges
 
 __all__ = ["MorphContext"]
 
@@ -47,8 +47,8 @@ class MorphContext:
     distances : FieldDistance, how far fits are from the field (cached; G1 and G2 ask for a face's plain fit
         against every trial).
     strain : float, the field's largest strain (:class:`~hot2cold.pipeline.checks.FieldScale`): a kink the
-        morph adds counts beyond ``KINK_NOISE_DEG`` plus twice this times the hot angle (what the field itself
-        does to an angle that is not quite zero when hot).
+        morph adds counts beyond :data:`~hot2cold.pipeline.g1.KINK_NOISE_DEG` plus twice this times the hot
+        angle (what the field itself does to an angle that is not quite zero when hot).
     noise : float, the scatter (mm per component) the fits smooth away
         (:func:`~hot2cold.pipeline.morph.smoothing_noise`).
     """
@@ -107,7 +107,7 @@ class MorphContext:
         if not self.tangent:
             return edge_morphs, []
         curves, corners = correct_corners(self.part, [e.curve for e in edge_morphs], self.tangent,
-                                          KINK_NOISE_DEG, decided=edge_decided(self.part), strain=self.strain)
+                                          decided=edge_decided(self.part), strain=self.strain)
         return [replace(e, curve=c) for e, c in zip(edge_morphs, curves)], corners
 
     def fit_faces(self, edge_morphs: list[EdgeMorph], progress: Callable[[int, int], None] | None = None
@@ -153,7 +153,7 @@ class MorphContext:
         for e in refined:
             edge_morphs[e] = fit_edge(part, part.edges[e], inputs)
         if self.tangent:
-            curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent, KINK_NOISE_DEG,
+            curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent,
                                         decided=edge_decided(part), strain=self.strain)
             edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
         return edge_morphs

@@ -27,7 +27,7 @@ from .context import MorphContext
 from .distance import Allowance
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
-from .g1 import (ALONG_CURVE, KINK_NOISE_DEG, REFINED, TURN_WEIGHT, CornerReport, G1Report, TangentEdge,
+from .g1 import (ALONG_CURVE, KINK_NOISE_DEG, REFINED, TURN_WEIGHT, CornerReport, G1Report, Neighbours, TangentEdge,
                  correct_corners, edge_decided, kink_bound, kink_maxima, kink_misses, surface_corner_normals,
                  turn_rows, with_corners)
 from .g1 import correct_g1 as second_rows
@@ -73,8 +73,8 @@ def anchor_corners(context: MorphContext, edge_morphs: list[EdgeMorph], face_mor
     anchors = surface_corner_normals(part, [f.surface for f in face_morphs], pairs)
     if not anchors:
         return edge_morphs, face_morphs, []
-    curves, corners = correct_corners(part, [e.curve for e in edge_morphs], context.tangent, KINK_NOISE_DEG,
-                                      anchors, decided, context.strain)
+    curves, corners = correct_corners(part, [e.curve for e in edge_morphs], context.tangent, anchors,
+                                      decided, context.strain)
     moved = {e for c in corners for e in c.edges}
     off = {e: why for e in sorted(moved)
            if (why := context.distances.edge_moved_off(e, edge_morphs[e], curves[e]))}
@@ -134,7 +134,8 @@ def _turn_along_curves(context: MorphContext, surfaces: list[BSplineSurface], al
     refused: dict[int, str] = {}
     for _ in range(_G1_ROUNDS):       # both faces turn to the common plane; a face that may not turn (it
         order = sorted(turning - kept)  # would leave the field) keeps its fit, and the other turns to it
-        turns = [turn_rows(part, surfaces, along, k, TURN_WEIGHT, kept=frozenset(kept)) for k in order]
+        near = Neighbours(part, surfaces, frozenset(kept))
+        turns = [turn_rows(near, along, k, TURN_WEIGHT) for k in order]
         refits = dict(zip(order, context.refit_faces(order, edge_morphs, turns)))
         off = context.distances.all_moved_off({k: (surfaces[k], refit.surface) for k, refit in refits.items()},
                                               grids, _TURNING)
@@ -349,9 +350,10 @@ class _Bending:
         and bend rows of ``weight`` towards the common curvature of the ``current`` surfaces."""
         part, tangent = self.context.part, self.context.tangent
         refits = {}
+        near = Neighbours(part, current, frozenset(kept))
         for k in sorted({k for te in bend for k in te.faces} - kept):
-            turn = turn_rows(part, current, tangent, k, TANGENT_WEIGHT, kept=frozenset(kept), sides=True)
-            bent = bend_rows(part, current, bend, k, weight, kept=frozenset(kept))
+            turn = turn_rows(near, tangent, k, TANGENT_WEIGHT, sides=True)
+            bent = bend_rows(near, bend, k, weight)
             refits[k] = self.context.fit_face(part, part.faces[k], self.edge_morphs,
                                               (sparse.vstack([turn[0], bent[0]], format="csr"),
                                                np.concatenate([turn[1], bent[1]])))

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import sparse
@@ -390,7 +390,7 @@ class _Task:
     keep: np.ndarray      # (m,) bool, rows where both normals are defined
 
 
-def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],  # noqa: C901, PLR0915
+def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
                edges: list[TangentEdge] | None = None,
                n_points_factor: int = 2, frozen: dict[int, str] | None = None
                ) -> tuple[list[BSplineSurface], list[G1Report]]:
@@ -426,58 +426,16 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
 
     before = kink_maxima(part, surfaces, edges)          # as the edges come, before any face turns
     reasons: list[str] = []
-    planned = []                                # (edge row, edge, its faces, their sides, why fixed, uv (m, 2) each)
+    planned: list[_Plan] = []
     for r, te in enumerate(edges):
-        fa, fb = (part.faces[k] for k in te.faces)
-        use_a, use_b = _use_of(fa, te.edge), _use_of(fb, te.edge)
-        # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
-        # the side row and the second row only, whatever part of the side the edge covers.
-        sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
-        why = [(frozen or {}).get(face.index) or _fixed_reason(face, found, tied_sides[face.index])
-               for face, found in zip((fa, fb), sides)]
-        if all(why):
-            reason = why[0] if why[0] == why[1] else "; ".join(why)
-            log.info("G1: edge %d (faces %d, %d) not corrected: %s", te.edge, *te.faces, reason)
-            reasons.append(reason)
+        plan = _plan(part, surfaces, te, tied_sides, frozen or {}, n_points_factor)
+        if isinstance(plan, str):
+            log.info("G1: edge %d (faces %d, %d) not corrected: %s", te.edge, *te.faces, plan)
+            reasons.append(plan)
             continue
         reasons.append("")
-        if any(why):
-            log.info("G1: edge %d (faces %d, %d): one face moves (%s)", te.edge, *te.faces, why[0] or why[1])
-        if None not in sides:
-            _share_side_row(part, surfaces, (fa, fb), sides, tied_sides)
-        # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
-        n_row = max(face.surface.shape[1 - found[0].axis] for face, found in zip((fa, fb), sides) if found)
-        m = max(n_points_factor * n_row, 2)
-        t = np.linspace(min(use_a.t[0], use_a.t[-1]), max(use_a.t[0], use_a.t[-1]), m)
-        uvs = []
-        for face, use, found in zip((fa, fb), (use_a, use_b), sides):
-            uv = _uv_at(use, t)
-            if found is not None:
-                axis, end = found[0].axis, found[0].end
-                uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
-            uvs.append(uv)
-        planned.append((r, te, (fa, fb), sides, why, uvs))
-
-    # the normals of every edge's points at once, face by face: on the surfaces with their side rows shared
-    # (the surfaces the second rows are solved on), and whether the hot ones are defined there
-    asked = [(faces[side].index, uvs[side]) for side in (0, 1) for _, _, faces, _, _, uvs in planned]
-    normals = _normals_by_face(surfaces, asked)
-    measurable = hot_measurable(part, asked[:len(planned)], asked[len(planned):])
-    tasks: list[_Task] = []
-    for i, (r, te, faces, sides, why, uvs) in enumerate(planned):
-        na, nb = normals[i], normals[len(planned) + i]
-        keep = np.isfinite(na).all(axis=1) & np.isfinite(nb).all(axis=1) & measurable[i]
-        sign = np.where(np.sum(na * nb, axis=1) < 0, -1.0, 1.0)
-        if why[0]:
-            normal_t = na                          # face a cannot move: b turns into its tangent plane
-        elif why[1]:
-            normal_t = nb
-        else:
-            normal_t = na + sign[:, None] * nb                                  # eq. (63)
-        for face, uv, found, fixed in zip(faces, uvs, sides, why):
-            if not fixed:
-                tasks.append(_Task(r, face.index, found[0], uv, normal_t, keep))
-
+        planned.append(replace(plan, report=r))
+    tasks = _tasks(part, surfaces, planned)
     for k in sorted({task.face for task in tasks}):
         _solve_face(part.faces[k], surfaces, tied_sides[k], [t for t in tasks if t.face == k])
 
@@ -491,6 +449,84 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
         if not reason:
             log.info("G1: edge %d (faces %d, %d): kink %.3g -> %.3g deg", te.edge, *te.faces, kb, after)
     return surfaces, reports
+
+
+@dataclass(frozen=True, eq=False)
+class _Plan:
+    """How :func:`correct_g1` treats one tangent edge.
+
+    Attributes
+    ----------
+    faces : the edge's two faces.
+    sides : per face, the side of its surface the edge lies along and whether backwards (``side_along``), or
+        None along a trimming curve.
+    why : per face, why it may not move ("" where it may).
+    uvs : per face, the parameters ``(m, 2)`` of the equidistant edge points ``u_q`` (eq. 75).
+    report : int, the edge's index in :func:`correct_g1`'s ``edges`` (that of its report).
+    """
+
+    faces: tuple[Face, Face]
+    sides: tuple
+    why: tuple[str, str]
+    uvs: tuple[np.ndarray, np.ndarray]
+    report: int = -1
+
+
+def _plan(part: Part, surfaces: list[BSplineSurface], te: TangentEdge, tied_sides: list[tuple[Side, ...]],
+          frozen: dict[int, str], n_points_factor: int) -> _Plan | str:
+    """How :func:`correct_g1` treats tangent edge ``te``: its faces, their sides along it, why either may not
+    move and the points ``u_q`` along it; or why it is not corrected (neither face may move).  Where the edge
+    is a side of both faces their side rows are made one (``surfaces`` changes)."""
+    fa, fb = (part.faces[k] for k in te.faces)
+    use_a, use_b = _use_of(fa, te.edge), _use_of(fb, te.edge)
+    # A trimmed face's edge may cover only part of a side: the cross derivative along a side depends on
+    # the side row and the second row only, whatever part of the side the edge covers.
+    sides = (side_along(fa.surface, use_a, whole=False), side_along(fb.surface, use_b, whole=False))
+    why = tuple(frozen.get(face.index) or _fixed_reason(face, found, tied_sides[face.index])
+                for face, found in zip((fa, fb), sides))
+    if all(why):
+        return why[0] if why[0] == why[1] else "; ".join(why)
+    if any(why):
+        log.info("G1: edge %d (faces %d, %d): one face moves (%s)", te.edge, *te.faces, why[0] or why[1])
+    if None not in sides:
+        _share_side_row(part, surfaces, (fa, fb), sides, tied_sides)
+    # Equidistant points u_q along the edge (eq. 75), about n_points_factor per pole of the longer row.
+    n_row = max(face.surface.shape[1 - found[0].axis] for face, found in zip((fa, fb), sides) if found)
+    m = max(n_points_factor * n_row, 2)
+    t = np.linspace(min(use_a.t[0], use_a.t[-1]), max(use_a.t[0], use_a.t[-1]), m)
+    uvs = []
+    for face, use, found in zip((fa, fb), (use_a, use_b), sides):
+        uv = _uv_at(use, t)
+        if found is not None:
+            axis, end = found[0].axis, found[0].end
+            uv[:, axis] = face.surface.domain[2 * axis + end]   # exactly on the side
+        uvs.append(uv)
+    return _Plan((fa, fb), sides, why, tuple(uvs))
+
+
+def _tasks(part: Part, surfaces: list[BSplineSurface], planned: list[_Plan]) -> list[_Task]:
+    """Each face's share of the ``planned`` edges' corrections: the common plane's normal ``n_T`` at the points
+    ``u_q`` (eq. 63; the fixed face's own normal where one face may not move).  The normals of every edge's
+    points at once, face by face, on ``surfaces`` (their side rows shared: the surfaces the second rows are
+    solved on), and only where the hot ones are defined."""
+    asked = [(plan.faces[side].index, plan.uvs[side]) for side in (0, 1) for plan in planned]
+    normals = _normals_by_face(surfaces, asked)
+    measurable = hot_measurable(part, asked[:len(planned)], asked[len(planned):])
+    tasks: list[_Task] = []
+    for i, plan in enumerate(planned):
+        na, nb = normals[i], normals[len(planned) + i]
+        keep = np.isfinite(na).all(axis=1) & np.isfinite(nb).all(axis=1) & measurable[i]
+        sign = np.where(np.sum(na * nb, axis=1) < 0, -1.0, 1.0)
+        if plan.why[0]:
+            normal_t = na                          # face a cannot move: b turns into its tangent plane
+        elif plan.why[1]:
+            normal_t = nb
+        else:
+            normal_t = na + sign[:, None] * nb                                  # eq. (63)
+        for face, uv, found, fixed in zip(plan.faces, plan.uvs, plan.sides, plan.why):
+            if not fixed:
+                tasks.append(_Task(plan.report, face.index, found[0], uv, normal_t, keep))
+    return tasks
 
 
 def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ...], tasks: list[_Task]) -> None:
@@ -567,22 +603,44 @@ def kink_misses(part: Part, surfaces: list[BSplineSurface], edges: list[TangentE
 TURN_WEIGHT = 10.0
 
 
-def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,  # noqa: PLR0913
-              n_points_factor: int = 2, kept: frozenset = frozenset(), sides: bool = False
+@dataclass(frozen=True, eq=False)
+class Neighbours:
+    """What the rows that steer one face's fit towards its neighbours' read (:func:`turn_rows`,
+    :func:`~hot2cold.pipeline.g2.bend_rows`).
+
+    Attributes
+    ----------
+    part : Part, the hot part.
+    surfaces : list of BSplineSurface, the morphed surface of every face.
+    kept : frozenset of int, faces that keep their fits: a face next to one turns (or bends) to it instead of
+        to the common plane (curvature).
+    n_points_factor : int, points along an edge per pole of the face's net, ``nu + nv`` (the paper takes about
+        two).
+    """
+
+    part: Part
+    surfaces: list[BSplineSurface]
+    kept: frozenset = frozenset()
+    n_points_factor: int = 2
+
+
+def turn_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float, sides: bool = False
               ) -> tuple[np.ndarray, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that turn its
     tangents along those of ``edges`` that lie inside its domain (with ``sides``, along all of them) into the
     common planes.
 
-    At ``n_points_factor * (nu + nv)`` points ``(u_q, v_q)`` along each such edge, with ``n`` the unit normal of
-    the common plane of the two morphed ``surfaces`` there (eq. 63) and ``S_u``, ``S_v`` the face's
-    tangents, the fit is asked for ``S_u - (S_u . n) n`` and ``S_v - (S_v . n) n`` (eq. 64-65, per parameter
-    direction; where the other face is in ``kept``, faces that do not turn, its own tangent plane instead):
+    At ``near.n_points_factor * (nu + nv)`` points ``(u_q, v_q)`` along each such edge, with ``n`` the unit
+    normal of the common plane of the two morphed ``near.surfaces`` there (eq. 63) and ``S_u``, ``S_v`` the
+    face's tangents, the fit is asked for ``S_u - (S_u . n) n`` and ``S_v - (S_v . n) n`` (eq. 64-65, per
+    parameter direction; where the other face is in ``near.kept``, faces that do not turn, its own tangent
+    plane instead):
     rows ``weight * h * dR_i/du(u_q, v_q)`` (``h``: the mean knot span, so that the rows are
     lengths, mm) against the pole displacements from the hot face, the targets less the hot tangents.  In
     the fit itself, next to the face's nodes, the face turns where its nodes let it.  Returns the rows
     ``(r, nu * nv)`` (sparse) and targets ``(r, 3)`` (none: ``(0, nu * nv)``, ``(0, 3)``).
     """
+    part, surfaces, kept = near.part, near.surfaces, near.kept
     hot, cold = part.faces[k].surface, surfaces[k]
     spans = mean_spans(hot)
     rows, targets = [], []
@@ -590,7 +648,7 @@ def turn_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
         if k not in te.faces or (te.sides[te.faces.index(k)] is not None and not sides):
             continue
         other = te.faces[1 - te.faces.index(k)]
-        uv, uv_o = edge_points(part, te, k, max(n_points_factor * sum(hot.shape), 2))
+        uv, uv_o = edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 2))
         n = surface_normals(cold, uv[:, 0], uv[:, 1])
         n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
         keep = (np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1)
@@ -744,9 +802,8 @@ def _spread(normals: dict) -> float:
     return max((_line_angle(a, b) for i, a in enumerate(vals) for b in vals[i + 1:]), default=0.0)
 
 
-def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],  # noqa: C901, PLR0913, PLR0915
-                    noise_deg: float = 1e-6, anchors: dict | None = None,
-                    decided: set[tuple[int, int]] | None = None, strain: float = 0.0
+def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
+                    anchors: dict | None = None, decided: set[tuple[int, int]] | None = None, strain: float = 0.0
                     ) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
     """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
 
@@ -755,8 +812,6 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
     part : the hot part.
     curves : the morphed curve of every edge (None for degenerate edges), same degrees, knots and weights.
     edges : the hot part's tangent edges (:func:`tangent_edges`).
-    noise_deg : corners where the morph opened the angle between the faces by less than this plus
-        ``2 strain`` times their hot angle are left alone.
     anchors : ``{(vertex, face): unit normal (3,)}`` of faces whose normal at the vertex their edges do not
         decide (a trimmed face, a face with a smooth boundary there), measured on their fitted surfaces:
         the common plane is then theirs (their mean), and only the edges of faces in ``decided`` move.
@@ -764,7 +819,9 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
         every face with two edges meeting at a corner there.
     strain : the field's largest strain (:class:`~hot2cold.pipeline.checks.FieldScale`).  A field turns the
         faces at a corner that is not quite one plane when hot by up to about twice its strain times their
-        angle (an affine map changes angles); that is the field's, not a kink the morph added.
+        angle (an affine map changes angles); that is the field's, not a kink the morph added.  Corners where
+        the morph opened the angle between the faces by less than :data:`KINK_NOISE_DEG` plus that are left
+        alone (:func:`kink_bound`).
 
     At a vertex, the faces joined by tangent edges there form a cluster.  Its common plane has the normal
     ``n_T``, the mean of the faces' normals (each the cross product of its two edges' tangents, oriented
@@ -779,96 +836,134 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
     """
     if len(curves) != len(part.edges):
         raise ValueError(f"{len(part.edges)} edges but {len(curves)} curves")
-    hot_curves = [e.curve for e in part.edges]
-    constraints: dict[int, list[tuple[int, np.ndarray, float]]] = {}   # edge -> (pole, n_T, rhs)
-    pending = []
-    report_anchors: dict[int, dict] = {}
+    corners = _Corners(part, curves, anchors or {}, decided, strain)
     by_vertex: dict[int, list[TangentEdge]] = {}
     for te in edges:
         for v in set(part.edges[te.edge].vertices):
             by_vertex.setdefault(v, []).append(te)
-    for v in sorted(by_vertex):
-        parent: dict[int, int] = {}
-
-        def root(k: int) -> int:
-            while parent.setdefault(k, k) != k:
-                k = parent[k]
-            return k
-
-        for te in by_vertex[v]:
-            parent[root(te.faces[0])] = root(te.faces[1])
-        clusters: dict[int, list[int]] = {}
-        for k in list(parent):
-            clusters.setdefault(root(k), []).append(k)
-        for faces in clusters.values():
-            faces = sorted(faces)
-            hot_n = _corner_normals(part, faces, v, hot_curves)
-            fixed_n = {k: anchors[(v, k)] for k in faces if anchors and (v, k) in anchors}
-            cold_n = _cluster_normals(part, faces, v, curves, fixed_n, decided)
-            for k, n in fixed_n.items():                  # hot normal of an anchored face, for orientation
-                hot_n.setdefault(k, n)
-            usable = sorted(set(hot_n) & set(cold_n))
-            hot_angle = _spread({k: hot_n[k] for k in usable})
-            before = _spread({k: cold_n[k] for k in usable})
-            report = dict(vertex=v, faces=tuple(faces), hot_angle=hot_angle, angle_before=before)
-            report_anchors[id(report)] = fixed_n
-            if len(usable) < 2:
-                pending.append((report, (), "fewer than two faces with two edges at the vertex"))
-                continue
-            if before - hot_angle <= kink_bound(hot_angle, noise_deg, strain):
-                pending.append((report, (), "no kink added"))
-                continue
-            movable = [k for k in usable if k not in fixed_n]
-            if not movable:
-                pending.append((report, (), "no face's normal there is decided by its edges"))
-                continue
-            ref = hot_n[usable[0]]
-            n_t = sum(np.sign(np.dot(hot_n[k], ref)) * np.sign(np.dot(cold_n[k], hot_n[k])) * cold_n[k]
-                      for k in (sorted(fixed_n) or usable))
-            bounding = [e for e in map(part.edges.__getitem__, part.vertex_edges[v]) if not e.degenerate
-                        and e.vertices[0] != e.vertices[1] and set(e.faces) & set(movable)]
-            # an edge of an anchored face stays (the face was fitted to it); a line cannot turn
-            stays = [e for e in bounding if curves[e.index].n_poles < 3 or set(e.faces) & set(fixed_n)]
-            fixed = [_unit(_end_tangent(curves[e.index], e.vertices[0] == v)) for e in stays]
-            if fixed:
-                basis, sing, _ = np.linalg.svd(np.array(fixed).T, full_matrices=False)
-                basis = basis[:, sing > np.sin(np.radians(_MIN_CORNER_DEG)) * sing[0]]
-                if basis.shape[1] >= 3:
-                    pending.append((report, (), "the edges' tangents at the vertex cannot turn"))
-                    continue
-                n_t = n_t - basis @ (basis.T @ n_t)
-            n_t = _unit(n_t)
-            if not np.isfinite(n_t).all():
-                pending.append((report, (), "no common plane"))
-                continue
-            moved = []
-            for e in bounding:
-                curve = curves[e.index]
-                if e in stays:
-                    continue
-                start = e.vertices[0] == v
-                pole = 1 if start else curve.n_poles - 2
-                constraints.setdefault(e.index, []).append((pole, n_t, -float(np.dot(n_t, _end_tangent(curve, start)))))
-                moved.append(e.index)
-            pending.append((report, tuple(moved), ""))
-
-    curves = list(curves)
-    for e, rows in constraints.items():
-        poles_at, delta = _least_change(rows)
-        poles = curves[e].poles.copy()
-        poles[poles_at] += delta
-        curves[e] = curves[e].with_poles(poles)
-
+    pending = [corners.plan(v, faces) for v in sorted(by_vertex) for faces in _clusters(by_vertex[v])]
+    curves = corners.moved()
     reports = []
-    for report, moved, reason in pending:
-        after_n = _cluster_normals(part, list(report["faces"]), report["vertex"], curves,
-                                   report_anchors[id(report)], decided)
-        after = _spread(after_n) if len(after_n) > 1 else report["angle_before"]
-        reports.append(CornerReport(**report, angle_after=after, edges=moved, reason=reason))
-        if not reason:
-            log.info("G1: vertex %d (faces %s): corner angle %.3g -> %.3g deg", report["vertex"],
-                     report["faces"], report["angle_before"], after)
+    for corner in pending:
+        after_n = _cluster_normals(part, list(corner.faces), corner.vertex, curves, corner.anchors, decided)
+        after = _spread(after_n) if len(after_n) > 1 else corner.angle_before
+        reports.append(CornerReport(corner.vertex, corner.faces, corner.hot_angle, corner.angle_before, after,
+                                    corner.edges, corner.reason))
+        if not corner.reason:
+            log.info("G1: vertex %d (faces %s): corner angle %.3g -> %.3g deg", corner.vertex, corner.faces,
+                     corner.angle_before, after)
     return curves, reports
+
+
+def _clusters(at_vertex: list[TangentEdge]) -> list[list[int]]:
+    """The faces joined by the tangent edges ``at_vertex`` (those at one vertex), in clusters of sorted face
+    indices (a union-find over the edges' face pairs)."""
+    parent: dict[int, int] = {}
+
+    def root(k: int) -> int:
+        while parent.setdefault(k, k) != k:
+            k = parent[k]
+        return k
+
+    for te in at_vertex:
+        parent[root(te.faces[0])] = root(te.faces[1])
+    clusters: dict[int, list[int]] = {}
+    for k in list(parent):
+        clusters.setdefault(root(k), []).append(k)
+    return [sorted(faces) for faces in clusters.values()]
+
+
+@dataclass(frozen=True)
+class _Corner:
+    """One cluster of faces at one vertex as :func:`correct_corners` found it: the fields of its
+    :class:`CornerReport` but the angle after, and the anchors' normals there (to measure it after)."""
+
+    vertex: int
+    faces: tuple[int, ...]
+    hot_angle: float
+    angle_before: float
+    anchors: dict
+    edges: tuple[int, ...] = ()
+    reason: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class _Corners:
+    """The corner planes of one :func:`correct_corners`: its inputs, and the conditions on the edges' poles next
+    to the vertices that :meth:`plan` collects (edge -> ``(pole, n_T (3,), rhs)``), solved by :meth:`moved`."""
+
+    part: Part
+    curves: list[BSplineCurve | None]
+    anchors: dict
+    decided: set[tuple[int, int]] | None
+    strain: float
+    constraints: dict = field(default_factory=dict)
+
+    def plan(self, v: int, faces: list[int]) -> _Corner:
+        """The cluster ``faces`` at vertex ``v``: its angles and, where the morph kinked it, the conditions that
+        turn the edges bounding its faces into one common plane (kept in :attr:`constraints`)."""
+        part, curves = self.part, self.curves
+        hot_n = _corner_normals(part, faces, v, [e.curve for e in part.edges])
+        fixed_n = {k: self.anchors[(v, k)] for k in faces if (v, k) in self.anchors}
+        cold_n = _cluster_normals(part, faces, v, curves, fixed_n, self.decided)
+        for k, n in fixed_n.items():                  # hot normal of an anchored face, for orientation
+            hot_n.setdefault(k, n)
+        usable = sorted(set(hot_n) & set(cold_n))
+        hot_angle = _spread({k: hot_n[k] for k in usable})
+        corner = _Corner(v, tuple(faces), hot_angle, _spread({k: cold_n[k] for k in usable}), fixed_n)
+        movable = [k for k in usable if k not in fixed_n]
+        if len(usable) < 2:
+            return replace(corner, reason="fewer than two faces with two edges at the vertex")
+        if corner.angle_before - hot_angle <= kink_bound(hot_angle, KINK_NOISE_DEG, self.strain):
+            return replace(corner, reason="no kink added")
+        if not movable:
+            return replace(corner, reason="no face's normal there is decided by its edges")
+        ref = hot_n[usable[0]]
+        n_t = sum(np.sign(np.dot(hot_n[k], ref)) * np.sign(np.dot(cold_n[k], hot_n[k])) * cold_n[k]
+                  for k in (sorted(fixed_n) or usable))
+        bounding = [e for e in map(part.edges.__getitem__, part.vertex_edges[v]) if not e.degenerate
+                    and e.vertices[0] != e.vertices[1] and set(e.faces) & set(movable)]
+        # an edge of an anchored face stays (the face was fitted to it); a line cannot turn
+        stays = [e for e in bounding if curves[e.index].n_poles < 3 or set(e.faces) & set(fixed_n)]
+        n_t, reason = _free_normal(n_t, [_unit(_end_tangent(curves[e.index], e.vertices[0] == v)) for e in stays])
+        if reason:
+            return replace(corner, reason=reason)
+        moved = []
+        for e in bounding:
+            if e in stays:
+                continue
+            curve, start = curves[e.index], e.vertices[0] == v
+            pole = 1 if start else curve.n_poles - 2
+            self.constraints.setdefault(e.index, []).append(
+                (pole, n_t, -float(np.dot(n_t, _end_tangent(curve, start)))))
+            moved.append(e.index)
+        return replace(corner, edges=tuple(moved))
+
+    def moved(self) -> list[BSplineCurve | None]:
+        """The curves with the poles next to the vertices moved by the least change that meets every condition
+        :meth:`plan` collected (:func:`_least_change`); edges left alone keep their curve object."""
+        curves = list(self.curves)
+        for e, rows in self.constraints.items():
+            poles_at, delta = _least_change(rows)
+            poles = curves[e].poles.copy()
+            poles[poles_at] += delta
+            curves[e] = curves[e].with_poles(poles)
+        return curves
+
+
+def _free_normal(n_t: np.ndarray, fixed: list[np.ndarray]) -> tuple[np.ndarray, str]:
+    """The common plane's normal ``n_T (3,)`` with the directions of the ``fixed`` unit tangents (edges that
+    cannot turn) removed, as a unit vector; and why there is none ("" where there is)."""
+    if fixed:
+        basis, sing, _ = np.linalg.svd(np.array(fixed).T, full_matrices=False)
+        basis = basis[:, sing > np.sin(np.radians(_MIN_CORNER_DEG)) * sing[0]]
+        if basis.shape[1] >= 3:
+            return n_t, "the edges' tangents at the vertex cannot turn"
+        n_t = n_t - basis @ (basis.T @ n_t)
+    n_t = _unit(n_t)
+    if not np.isfinite(n_t).all():
+        return n_t, "no common plane"
+    return n_t, ""
 
 
 def _least_change(rows: list[tuple[int, np.ndarray, float]]) -> tuple[list[int], np.ndarray]:

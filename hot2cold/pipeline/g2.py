@@ -31,7 +31,7 @@ from scipy import sparse
 from ..core.bspline import (BSplineSurface, cross, evaluate_surface, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
-from .g1 import TangentEdge, _matched_uv, _use_of, edge_points, hot_defined, mean_spans
+from .g1 import Neighbours, TangentEdge, _matched_uv, _use_of, edge_points, hot_defined, mean_spans
 
 log = logging.getLogger(__name__)
 
@@ -137,20 +137,21 @@ def edge_jump(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> 
                          jump.normal).relative(1.0 / part.diagonal)
 
 
-def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], k: int, weight: float,  # noqa: PLR0913
-              n_points_factor: int = 2, kept: frozenset = frozenset()) -> tuple[sparse.csr_array, np.ndarray]:
+def bend_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float
+              ) -> tuple[sparse.csr_array, np.ndarray]:
     """Rows for the fit of face ``k`` (:func:`hot2cold.pipeline.face_fit.morph_face`'s ``turn``) that give its
     normal curvature across each of ``edges`` it bounds the common value.
 
-    At ``n_points_factor * (nu + nv)`` points along each edge, with ``kappa``, ``kappa*`` the normal
-    curvatures across it of the two morphed ``surfaces`` (:func:`curvature_jump`) and ``kappa_T`` their mean
-    (the other face's where it is in ``kept``, faces that keep their fits), the fit is asked for
+    At ``near.n_points_factor * (nu + nv)`` points along each edge, with ``kappa``, ``kappa*`` the normal
+    curvatures across it of the two morphed ``near.surfaces`` (:func:`curvature_jump`) and ``kappa_T`` their
+    mean (the other face's where it is in ``near.kept``, faces that keep their fits), the fit is asked for
     ``S_cc + (kappa_T - kappa) n``: the face's second derivative across the edge, its normal part moved to
     the common curvature.  Rows ``weight * l^2 * B_cc`` (``B_cc = a^2 B_uu + 2 a b B_uv + b^2 B_vv`` of the
     hot face, :func:`~hot2cold.core.bspline.surface_second_derivative_bases`; ``l`` the face's mean knot span
     in mm, so that the rows are lengths) against the pole displacements from the hot face.  Returns the rows
     ``(r, nu * nv)`` (sparse) and targets ``(r, 3)``.
     """
+    part, surfaces, kept = near.part, near.surfaces, near.kept
     hot, cold = part.faces[k].surface, surfaces[k]
     spans = mean_spans(hot)
     rows, targets = [], []
@@ -158,7 +159,7 @@ def bend_rows(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdg
         if k not in te.faces:
             continue
         other = te.faces[1 - te.faces.index(k)]
-        uv, uv_o = edge_points(part, te, k, max(n_points_factor * sum(hot.shape), 3))
+        uv, uv_o = edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 3))
         tangent = _edge_tangents(cold, uv)
         kappa, n, ab = cross_curvature(cold, uv, tangent)
         kappa_o, n_o, _ = cross_curvature(surfaces[other], uv_o, tangent)
