@@ -70,8 +70,8 @@ class Settings:
         nodes decide a pole (a thin leading edge).
     max_refinements : int
         Rounds of refinement a face gets at the most.  Each halves the spans that miss, so 8 rounds can cut a
-        hot span into 256; the refinement stops sooner where the spans reach the nodes' spacing.  (4 rounds
-        left the CalculiX field of the bundled twisted blade at 1.46e-3 mm; it met 1e-3 in 6.)
+        hot span into 256; the refinement stops sooner where the spans reach the nodes' spacing.  (A real FE
+        field next to a clamped face can need more than half of them to meet the default tolerance.)
     g1_angle : float or None
         Edges where the hot faces meet within this angle (degrees) are tangent; after the morph their
         kink is corrected (paper section 5).  None: no G1 correction.
@@ -93,8 +93,8 @@ class Settings:
         ``threadpoolctl`` for the duration of the call.  The limit is process-wide: while it holds, every
         other thread of the process (a Dask worker's other tasks, the caller's own numpy) gets it too.
         The fits are many small dense problems that gain nothing from threads, and on a busy machine the
-        threads spin against each other: Rotor 37 with 36 000 nodes on this 2-core machine with a second job
-        running, edges 22 s and faces 10 s with OpenBLAS's default threads, 0.5 s and 2.5 s with one.
+        threads spin against each other: the fits then take many times longer with the library's default
+        threads than with one.
         None (the default) leaves the library as it is; the ``hot2cold`` command holds its own process to
         one thread around its morph.
     threads : int
@@ -119,8 +119,8 @@ class Settings:
         diagonal; a field that moves a node farther is refused (FieldError) as no hot-to-cold field.  A
         hot-to-cold field is thermal and centrifugal strain, and a part's rigid shift with the parts it sits
         on: the paper's fields move parts of 50 to 300 mm by up to 3 mm (at most 6 %), the bundled sample
-        fields by at most 1.7 % (``docs/guide/bad_input.md``, "How the checks work").  Cold positions given as
-        displacements move a part by about its own size (95 % on the blade).  0.1 leaves honest fields a margin over the
+        fields by less (``docs/guide/bad_input.md``, "How the checks work").  Cold positions given as
+        displacements move a part by about its own size.  0.1 leaves honest fields a margin over the
         paper's largest; raise it for the rare honest field that moves a part farther (a small part carried
         far by a larger one).
     """

@@ -556,9 +556,9 @@ def normal_rounding(surface: BSplineSurface, u, v) -> np.ndarray:
     its length, ``noise_u / |S_u| + noise_v / |S_v|``; inf where a derivative vanishes.
 
     Next to a side that is collapsed all but to rounding the normal is defined but rests on pole differences
-    of a few rounding units: a STEP writer's sliver face with ``|S_u|`` 1e-7 mm against ``|S_v|`` 25 at its
-    corner, where the noise of a fit (2e-10 mm) turns it by 0.6 deg within 6e-6 mm of the corner; this
-    estimate gives 0.9 deg there.
+    of a few rounding units (a STEP writer's sliver face, one first derivative vanishingly short against the
+    other at its corner): there the noise of a fit turns the normal by a large angle close to the corner, and
+    this estimate bounds that turn rather than taking the normal for exact.
     """
     _, lu, lv, noise_u, noise_v = _normal_parts(surface, u, v)
     return _rounding(lu, lv, noise_u, noise_v)

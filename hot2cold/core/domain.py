@@ -1,6 +1,6 @@
 """A face's trimmed domain as a raster, to tell inside from outside for many parameter pairs at once.
 
-The kernel's ``BRepTopAdaptor_FClass2d`` answers one ``(u, v)`` at a time (about 30 us).  Classifying a
+The kernel's ``BRepTopAdaptor_FClass2d`` answers one ``(u, v)`` at a time, a kernel call each.  Classifying a
 million foot points, or the artificial-node candidates of a finely trimmed face, one by one is too slow, but
 almost every point is far from the boundary.  So the face's parameter box is cut into ``n x n`` cells:
 

@@ -20,13 +20,12 @@ A settled node is at a local minimum of the distance no farther than its start. 
 foot point when the start lies in that minimum's basin, which the caller ensures by starting each node at
 the nearest point of a sample of the face dense against its curvature: a foot point no farther than the
 nearest sample, yet not the nearest one, needs a second sheet of the surface within that distance.  On the
-sample parts the two agree to 1e-13 mm and 1e-14 of the box (``tests/test_footpoint.py``,
-``benchmarks/scale.py``).  From a poor start (3 % of the box off, across Rotor 37's leading edge) Newton
-can settle in the wrong basin: 0.39 mm instead of 0.046 mm.
+sample parts the two agree to rounding (``tests/test_footpoint.py``, ``benchmarks/scale.py``).  From a poor
+start (a few per cent of the box off, across a thin leading edge) Newton can settle in the wrong basin, on a
+foot point several times farther than the nearest: the start has to be near.
 
-The kernel needs one call per node and face (100 to 300 us with its default algorithm on Rotor 37); this
-needs about three vectorised evaluations of the surface's second-order jet for all nodes of a face (about
-1 us a node each).
+The kernel needs one call per node and face; this needs about three vectorised evaluations of the surface's
+second-order jet for all nodes of a face, a small fraction of a kernel call's cost per node.
 """
 from __future__ import annotations
 
@@ -189,12 +188,13 @@ def surface_distances(surface: BSplineSurface, points: np.ndarray, uv: np.ndarra
 
     With ``past_border``, a point whose last Gauss-Newton step pushes out of the box is measured from the
     surface's tangent plane at the border instead: the distance across the surface, not the slide along it
-    past a trim or a seam (the sides of a face are its edges' business).  A point on the seam of a NIST
-    Geom face, moved by the field 9.4e-3 mm along the surface across it, was 4.5e-8 mm off the cold face.
+    past a trim or a seam (the sides of a face are its edges' business): a point on the seam of a periodic
+    face that the field moves along the surface across the seam is measured by how far it lies off the cold
+    face, not by how far it slid.
 
     A point whose (clipped) step is below :data:`STEP_RTOL` of the box is settled: it is evaluated once more
-    where that step takes it (on the surface, a residual of the step times ``|S_u|``: 2.6e-8 mm on Rotor 67's
-    degree-14 faces under an exactly affine field) and not again, and its step counts as the last one.  Most
+    where that step takes it (on the surface, a residual of the step times ``|S_u|``, far below any tolerance
+    even on high-degree faces) and not again, and its step counts as the last one.  Most
     points settle in two or three steps of the :data:`LOCAL_STEPS`.
 
     With ``return_uv``, also the parameters ``(m, 2)`` where each point's last step took it (in the box).

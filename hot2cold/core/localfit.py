@@ -195,9 +195,9 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     The quadratic correction is trusted only as far as the field is quadratic over the neighbourhood: the
     trust is 1 where the quadratic terms leave less than ``TRUSTED`` of the linear fit's residual (rms), 0
     where they leave more than ``UNTRUSTED``.  Smooth analytic fields (an untwist, a stretch, bending) leave
-    less than 0.3 % over the neighbourhoods of the parts' artificial nodes; the CalculiX field of Rotor 37,
-    whose hub is clamped, leaves 5 to 90 %: extrapolated 10 to 25 mm over the hub's trimmed-away part, its
-    quadratic terms gave displacements of 0.1 to 0.5 mm where the hub and every node on it stay put.
+    a small fraction of a per cent over the neighbourhoods of the artificial nodes; an FE field next to a
+    clamped face leaves far more, and its quadratic terms, extrapolated over a trimmed-away part of the clamped
+    face, would move points that the clamp and every node on it hold still.
     """
     span = Span.of(points, valid)
     w = valid[..., None].astype(float)

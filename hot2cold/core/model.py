@@ -303,8 +303,8 @@ class Classification:
     def spacing(self, nodes: np.ndarray | None = None) -> float:
         """The node spacing (mm) of ``nodes`` (all used nodes if None): the median of their
         :attr:`spacings`, inf where none is known.  Over a face's nodes it is the spacing of the field around
-        them however few they are (a plane of a tessellated part with nodes only at its six corners, 150 mm
-        apart, has the spacing of the nodes next to those corners)."""
+        them however few they are (a large plane of a tessellated part with nodes only at its corners has the
+        spacing of the nodes next to those corners, not the corners' distance apart)."""
         values = self.spacings if nodes is None else self.spacings[nodes]
         values = values[np.isfinite(values)]
         return float(np.median(values)) if len(values) else float("inf")

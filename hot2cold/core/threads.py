@@ -19,9 +19,8 @@ R = TypeVar("R")
 
 #: A face's work is worth a thread of its own from about this many nodes (its rows, foot points, grid
 #: points): below, Python's own steps outweigh the array work, and two threads only take the lock from each
-#: other.  Every face of the real corpus's parts in two threads (5 000 to 25 000 nodes over 30 to 660 faces,
-#: tens to hundreds of nodes each) was no faster than one: the lower leg 60.3 -> 61.0 s, NIST FTC-10 21.2 ->
-#: 21.6 s; Rotor 37 with 10 000 nodes, two faces of 4 600, 6.9 -> 6.0 s.
+#: other, so a part of many faces with tens to hundreds of nodes each gains nothing from threads; a few large
+#: faces do.
 LARGE = 4_000
 
 

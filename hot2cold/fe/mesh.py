@@ -6,7 +6,7 @@ tetrahedra, second order by default, and the element size follows the surface cu
 of boundary edges lie on the curved CAD surface: each is the orthogonal projection of its straight edge's
 midpoint onto the curve or surface the edge lies on.  (gmsh's own curved placement takes the midpoint in
 the surface's parameters, which on the strongly non-uniform B-spline parameters of a blade lands up to half
-an edge length away and inverts thin elements: 890 of 24 517 on Rotor 37.)  Any element still inverted is
+an edge length away and inverts thin elements by the hundred.)  Any element still inverted is
 straightened (logged as a warning).
 
 Numbering
@@ -246,9 +246,9 @@ def mesh_step(step_path, size: float, min_size: float | None = None, curvature: 
     -----
     A curved tetrahedron whose Jacobian turns non-positive anywhere (gmsh's ``minDetJac``) is straightened
     (logged as a warning with the largest distance of a straightened boundary node from the CAD surface).
-    This happens where the surface curves more sharply than the elements can follow: on Rotor 37 with
-    ``size=2, min_size=0.2``, 889 of 24 517 elements at the leading edge, whose B-spline has curvature
-    spikes down to 0.01 mm radius; their nodes lie up to 0.12 mm off the surface.
+    This happens where the surface curves more sharply than the elements can follow (a blade's leading edge
+    whose B-spline has curvature spikes far sharper than the smallest element); the straightened elements'
+    boundary nodes then lie off the CAD surface, by as much as the warning states.
     ValueError
         A size, the curvature or the order is out of range.
     """
@@ -352,9 +352,9 @@ def _place_midside(gmsh, etype: int) -> tuple[int, float]:
     """Put the midside nodes of boundary edges on the CAD geometry, by projection of the edge's midpoint.
 
     gmsh's own curved placement (``Mesh.SecondOrderLinear = 0``) takes the parametric midpoint of the edge,
-    which lands far from the edge (up to half its length, measured on Rotor 37) where a B-spline surface's
-    parameters are strongly non-uniform, and inverts thin elements.  The orthogonal projection of the
-    straight midpoint onto the curve or surface is off the chord by the sagitta only.
+    which lands far from the edge (up to half its length) where a B-spline surface's parameters are strongly
+    non-uniform, and inverts thin elements.  The orthogonal projection of the straight midpoint onto the curve
+    or surface is off the chord by the sagitta only.
 
     Returns the number of nodes moved and the largest move, mm.
     """

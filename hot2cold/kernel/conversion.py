@@ -239,8 +239,8 @@ def _turn_to_face(face, index: int) -> None:
 
 
 #: Offset surfaces are approximated to this share of the part's diagonal.  ``BRepBuilderAPI_NurbsConvert``
-#: approximates them to about 1e-6 of their size (a build123d hull's offset faces: 4.0e-6 mm off, one
-#: Bezier patch of degree 7), and a morph exact on the converted part is then that far off the part.
+#: approximates them only coarsely (a single low-order patch, far looser than the morph's tolerance allows),
+#: and a morph exact on the converted part is then that far off the part.
 _OFFSET_TOLERANCE = 1e-11
 #: Largest degree and number of spans per direction of that approximation; one that misses its tolerance by
 #: more than ``_OFFSET_ACCEPT`` times is not taken.
@@ -296,8 +296,8 @@ def _into_first_period(face, surface: Geom_BSplineSurface, index: int) -> None:
     """Bring ``face``'s parameters into its periodic surface's first period, in place, before the surface is
     made non-periodic (which keeps only that period).
 
-    A periodic direction whose face parameters lie a whole number of periods away (a torus face of an
-    Autodesk export runs over u 5.34 to 11.63 on a surface of 0 to 2 pi) has the face's pcurves moved by those
+    A periodic direction whose face parameters lie a whole number of periods away (a torus face whose
+    parameters run over its surface's second period rather than its first) has the face's pcurves moved by those
     periods; one that straddles the period's end has the surface's origin set where the face begins (a knot
     inserted there, the geometry unchanged), so that one period holds the whole face.  ``index`` numbers the face
     in a message.

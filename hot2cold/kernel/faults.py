@@ -37,7 +37,7 @@ def surface_type(face) -> str:
 def face_point(face) -> tuple[float, float, float]:
     """A point ``(3,)`` on ``face`` in mm: its surface at the middle of its parameter box where that lies on
     the face, else the middle of its longest edge (the middle of a trimmed or overrun face's box can lie far
-    from it: an NX plate's face was named at a point a million times outside the part)."""
+    from it, and a face named there would be named at a point far outside the part)."""
     try:
         u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
         u, v = (u0 + u1) / 2, (v0 + v1) / 2

@@ -3,8 +3,9 @@
 ``GeomAPI_ProjectPointOnSurf`` and ``GeomAPI_ProjectPointOnCurve`` are initialised once per face or edge
 and then asked point by point.  They are the reference the vectorised foot points of
 :mod:`hot2cold.core.footpoint` are checked against, and they settle the nodes that Newton's method leaves open.
-The default (gradient) algorithm is used: the tree one (``Extrema_ExtAlgo_Tree``) is twice as fast but
-missed the foot point of 2 in 3000 points lying on Rotor 37's leading-edge face (0.06 mm off).
+The default (gradient) algorithm is used: the tree one (``Extrema_ExtAlgo_Tree``) is faster but misses the
+foot point of some points that lie on a thin, strongly curved face (a leading edge), and the reference must
+not miss.
 
 Whether a parameter pair lies in a face's trimmed domain is read off a raster of the domain
 (:class:`hot2cold.core.domain.DomainRaster`) built from the face's pcurves; ``BRepTopAdaptor_FClass2d`` decides

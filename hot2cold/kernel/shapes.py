@@ -1,6 +1,6 @@
 """Accepting the user's shapes (path, CadQuery object or raw ``TopoDS_Shape``) and handing back CadQuery ones.
 
-CadQuery (1.4 s to import, with VTK) is imported only when a CadQuery shape is asked for: a shape the user
+CadQuery (slow to import, with VTK) is imported only when a CadQuery shape is asked for: a shape the user
 passes in is one only if CadQuery is loaded already.
 """
 from __future__ import annotations

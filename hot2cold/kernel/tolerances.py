@@ -8,12 +8,12 @@ the edge's tolerance to cover it, then lets ``BRepLib`` bring vertex tolerances 
 kernel sees a closed, valid solid whose tolerances state the true gaps.
 
 The gap is measured against the edge's curve on the face (its pcurve), which the morph keeps from the hot
-part.  Under a field that is not affine a face's parameters slide along its surface against its edges' (a
-narrow plane 395 mm long, bilinear, between ten straight edges: 0.046 mm), so the pcurve misses the cold
-edge while the edge lies on the cold surface to 3e-6 mm.  Where the gap is above ``reproject_above``, the
-pcurve is projected again from the cold edge (``ShapeFix_Edge``) and kept if it is nearer: the tolerance then
-states the true gap, and the STEP file reads back valid (the vise under a smooth field on a triangulation's
-nodes: two faces unorientable when read back, with tolerances of 0.07 mm, before).  A face with such curves
+part.  Under a field that is not affine a face's parameters slide along its surface against its edges' (most
+on a long, narrow bilinear plane between many straight edges), so the pcurve misses the cold edge by far more
+than the edge misses the cold surface.  Where the gap is above ``reproject_above``, the pcurve is projected
+again from the cold edge (``ShapeFix_Edge``) and kept if it is nearer: the tolerance then states the true gap,
+and the STEP file reads back valid (with the old pcurves, widened tolerances alone can leave faces that
+cannot be oriented when the file is read back).  A face with such curves
 then has the ends of its curves closed onto each other where they part
 (:func:`~hot2cold.kernel.repair.close_gaps`): a projection stops at the edge of the surface's domain, which a
 face may overrun, where its neighbour's curve ends outside it.
@@ -55,8 +55,8 @@ _MEET_TOLERANCE = 1e-10
 def _gap(edge, face, n: int) -> float:
     """Largest distance between the edge's 3D curve and its curve on ``face`` at ``n`` parameters, or at
     ``_PER_KNOT`` per knot of a B-spline curve where that is more: an edge refined to a tolerance has many
-    spans, and a gap that rises and falls within a span slipped between 51 samples, to be found by BRepCheck
-    (InvalidCurveOnSurface: a sector under a field with a kink, its arcs refined to 30 poles)."""
+    spans, and a gap that rises and falls within a span slips between evenly spread samples, to be found by
+    BRepCheck later (InvalidCurveOnSurface, on arcs refined under a field with a kink)."""
     c3d = BRepAdaptor_Curve(edge)
     on_face = BRepAdaptor_Curve(edge, face)
     if c3d.GetType() == GeomAbs_BSplineCurve:
@@ -91,9 +91,9 @@ def _reproject(edge, face, gap: float, samples: int) -> float:
 
 #: A curve projected again may lie at most this share of its face's extent in parameters from the old one.
 #: Where the morph slid a face's parameters against its edges, the two lie a gap's length apart; a projection
-#: onto a closed surface may land on the far side of its seam instead (a tinymovr face on a sphere-like
-#: B-spline: the curve along u = 0 projected to u = 0.15, the period's end, and its neighbour round the other
-#: way), which reads back as a face inside out.
+#: onto a closed surface may land on the far side of its seam instead (a curve along the seam of a sphere-like
+#: B-spline projected to the period's other end, its neighbour round the other way), which reads back as a
+#: face inside out.
 _SLIDE_SHARE = 0.25
 
 

@@ -11,19 +11,18 @@ polynomials over foot points around it instead:
   the paper's triangle degenerate and its extrapolation explode), and it averages the noise of many nodes;
 * a quadratic correction, weighted by how well the quadratic terms describe the field over the neighbourhood
   (:func:`hot2cold.core.localfit.fits_at`).  A smooth field (thermal strain, an untwist, a span-wise
-  stretch) is nearly quadratic at the scale of a part, and the linear fit alone misses its curvature: on
-  Rotor 37 with an untwist field it was 1e-3 mm off at the artificial nodes 2 to 3 mm beyond the aerofoil
-  faces' trims, the quadratic one 2e-6 mm.  A real FE field need not be (Rotor 37's CalculiX field, clamped
-  at the hub, is not), and there the correction is left out;
-* neighbourhoods that grow with the distance.  The ``k`` nearest foot points of a point 10 to 25 mm out on
-  the hub surface of Rotor 37 are a cluster a few mm across, thin across the blade, and a fit over them
-  extrapolated its noise and curvature by the ratio of the two: 0.3 to 0.9 mm off a smooth field of 0.7 mm,
-  and the cold hub surface folded over its trimmed-away part.  A point whose nearest foot point is ``rho``
-  away takes for its linear fit the foot points within ``LINEAR_REACH * rho``, for its quadratic one those
-  within ``REACH * rho`` (both thinned to about ``MAX_NEIGHBOURS``), whenever that ball holds more than its
-  ``k`` nearest: their spread is then of the order of the extrapolation distance.  The quadratic fit needs
-  the wider ball (across a hole in the node set it must reach the far side); the linear one, used where the
-  field is not quadratic, stays closer to the point.
+  stretch) is nearly quadratic at the scale of a part, and the linear fit alone misses its curvature at
+  artificial nodes beyond a face's trims by as much as the tolerance, where the quadratic one stays far below
+  it.  A real FE field need not be (one clamped at a face is not), and there the correction is left out;
+* neighbourhoods that grow with the distance.  The ``k`` nearest foot points of a point far out on a
+  trimmed-away part (a blade's hub surface) are a cluster much smaller than that distance, thin across the
+  blade, and a fit over them extrapolates its noise and curvature by the ratio of the two: off by a large
+  share of the field itself, and the cold surface folds over its trimmed-away part.  A point whose nearest
+  foot point is ``rho`` away takes for its linear fit the foot points within ``LINEAR_REACH * rho``, for its
+  quadratic one those within ``REACH * rho`` (both thinned to about ``MAX_NEIGHBOURS``), whenever that ball
+  holds more than its ``k`` nearest: their spread is then of the order of the extrapolation distance.  The
+  quadratic fit needs the wider ball (across a hole in the node set it must reach the far side); the linear
+  one, used where the field is not quadratic, stays closer to the point.
 """
 from __future__ import annotations
 
@@ -185,8 +184,9 @@ class FieldEstimator:
         point's direction, else over the widest.
 
         A flat neighbourhood (the foot points of one planar face, or of a straight edge) says nothing about the
-        field's change across it, and the pseudo-inverse takes none: an affine field was 2.9e-3 mm off at an
-        artificial node 5 mm beside the plane of its 20 nearest foot points (a machine vise from NX)."""
+        field's change across it, and the pseudo-inverse takes none: even an affine field is missed at an
+        artificial node beside the plane of its nearest foot points, by its gradient across the plane times the
+        distance."""
         out = np.empty_like(x)
         pending = np.arange(len(x))
         k = self._k
@@ -237,9 +237,9 @@ def carry_to_feet(points: np.ndarray, feet: np.ndarray, displacements: np.ndarra
 
     A node beside its face or edge (up to ``Settings.node_distance`` and ``edge_distance`` off: a face's node
     near an edge feeds the edge, a mesh's node a little off a curved face) would otherwise move the surface by
-    the field's gradient times that offset too much or too little: an exactly affine field at nodes 1e-2 mm
-    beside the edges of a rotor blade missed by 1.3e-5 mm.  Nodes less than ``gap`` (mm) from their foot point,
-    and unused ones, keep their displacement.
+    the field's gradient times that offset too much or too little, and even an exactly affine field would not
+    be met exactly.  Nodes less than ``gap`` (mm) from their foot point, and unused ones, keep their
+    displacement.
     """
     out = np.array(displacements, float)
     off = used & (np.linalg.norm(points - np.where(used[:, None], feet, points), axis=1) > gap)
@@ -255,8 +255,8 @@ class ElementField:
     functions of its boundary triangles (:class:`hot2cold.core.elements.SurfaceInterpolator`).
 
     Where a field brings its elements, this is the reference between the nodes: a local quadratic over the
-    nodes smooths over what the elements bend (next to a clamped face, a kink: on the bundled mixer by its
-    clamped inlet a quadratic over the neighbours misses the nodes themselves by up to 9.8e-3 mm).
+    nodes smooths over what the elements bend (next to a clamped face, a kink, where a quadratic over the
+    neighbours misses the nodes themselves by several times the tolerance).
 
     Parameters
     ----------

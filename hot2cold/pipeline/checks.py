@@ -275,8 +275,8 @@ _NAMED = 6
 #: A face without FE nodes where the node density of the faces with nodes would put at least this many is
 #: not covered by the field (with fewer, it is a small face or a sparse field: its nodes are artificial).
 _EXPECTED_NODES = 10
-#: ... and so is one that holds at least this share of the part's surface, however sparse the field (three
-#: nodes on a blade left both of its sides without one, and the density rule let it through).
+#: ... and so is one that holds at least this share of the part's surface, however sparse the field (a field
+#: of a handful of nodes can leave a large face without one, and the density rule alone lets it through).
 _LARGE_SHARE = 0.1
 
 
@@ -289,9 +289,9 @@ def face_coverage(part: Part, cls: Classification) -> tuple[np.ndarray, np.ndarr
     A node on a face's edge is a node of that face: the edge fit (eq. 33-37) takes it, and the face's
     boundary rows come from the morphed edges.  A vertex holds a node when one is classified to it, or when the
     foot point of an edge or vertex node lies within the edge distance of it: a node at the end of one edge is
-    at the vertex of the next, and a part may hold two vertices at one point (a NIST part's two half-cylinders,
-    whose straight seam edges a triangulation puts no node along, end at vertices that coincide with others,
-    which took the nodes there).
+    at the vertex of the next, and a part may hold two vertices at one point (two half-cylinders, whose
+    straight seam edges a triangulation puts no node along, end at vertices that coincide with others, which
+    take the nodes there).
     """
     n_faces = len(part.faces)
     inner = np.bincount(cls.owner[cls.role == Role.FACE], minlength=n_faces)
@@ -485,15 +485,15 @@ _VOLUME_FLOOR = 1e-3
 #: Between the nodes a cold face may be up to ``_BETWEEN_MARGIN`` times the field's largest displacement from
 #: the field's local estimate, plus ``_BETWEEN_FLOOR`` times the node distance (:attr:`FieldScale.between_bound`).
 #: A face that misses the field between its nodes by a share of the displacement is inaccurate, and the report
-#: says by how much: a plane kept bilinear misses a bending field by up to 40 % on real parts, and a box's
-#: face bent by a field quadratic along it (its edges straight lines between the moved corners) by the whole
-#: displacement.  A fit of displacements no larger than the field's does not go twice as far; a face that
-#: does follows no field (``--extrapolate`` once wrote parts 0.9 to 60 mm off with exit 0).
+#: says by how much: a plane kept bilinear misses a bending field by a large share of the displacement, and a
+#: box's face bent by a field quadratic along it (its edges straight lines between the moved corners) by the
+#: whole displacement.  A fit of displacements no larger than the field's does not go twice as far; a face that
+#: does follows no field (without this bound, ``--extrapolate`` could write parts far off with exit 0).
 _BETWEEN_MARGIN, _BETWEEN_FLOOR = 2.0, 1e-3
 #: With ``--extrapolate``, a field that leaves faces bare and has more than this share of its nodes outside the
-#: part's bounding box (enlarged by the node distance) is refused as another part's field: the bundled blade's
-#: field on the bundled block has 89 % of its 19 182 nodes outside, 13 of them on the block.  (A field with
-#: its volume nodes has them inside; one of a whole assembly, given for one of its parts, covers that part.)
+#: part's bounding box (enlarged by the node distance) is refused as another part's field: one part's field
+#: given with another part has most of its nodes outside and only a few on it.  (A field with its volume nodes
+#: has them inside; one of a whole assembly, given for one of its parts, covers that part.)
 _FOREIGN_SHARE = 0.5
 #: Nearest neighbours of each node whose displacements estimate the field's strain.
 _STRAIN_NEIGHBOURS = 8
@@ -585,9 +585,9 @@ class ColdCheck:
         field's local estimate puts the points of a grid over its trimmed domain near its nodes
         (``FaceGrid.near``), less the estimate's own miss at the nearest nodes (``FaceGrid.slack``): the
         error between the nodes, as far as the nodes tell (NaN for a face without such points).  Farther
-        from the nodes the estimate extrapolates (0.096 mm off in the middle of a 150 mm plane of the vise
-        whose nodes lie at its corners, where the cold face was 1.3e-3 mm off the exact field); there it
-        only bounds how far a face may wander (``FieldScale.between_bound``).
+        from the nodes the estimate extrapolates (in the middle of a large plane whose nodes lie at its
+        corners it is far worse than the cold face itself); there it only bounds how far a face may wander
+        (``FieldScale.between_bound``).
     unmeasured : (n_faces,) float array, per face the share (0 to 1) of its grid the check does not measure
         against the tolerance (:meth:`FaceGrid.unmeasured`; NaN for an empty grid).
     uncertain : (n_faces,) float array, the share of it that is near the nodes, where the nodes do not tell
@@ -622,8 +622,8 @@ class FaceGrid:
         and its vertices (inf where they have none).
     support : float, the distance (mm) within which those nodes tell the field at a point: ``GRID_REACH``
         times the larger of their spacing and the spacing of all nodes (a small face's nodes crowd along its
-        edges, closer than the mesh's spacing: a SolidWorks part's 2 mm wide faces on FE nodes 3 mm apart
-        had them 0.5 mm apart, and 2 mm from a node was "far" by their measure).
+        edges, closer than the mesh's spacing: on a face narrower than the node spacing, a point a spacing
+        from a node would be "far" by their own measure).
     slack : (m,) float array, how far (mm) the estimate misses the displacements of the nearest
         ``_SLACK_NODES`` nodes at the most (0 where not ``near``): where
         the field has a kink the local fits cannot follow (next to a clamped face) or scatters, the estimate
@@ -686,8 +686,8 @@ GRID_REACH = 2.0
 #: The slack of a grid point is the estimate's largest miss at this many nearest nodes.
 _SLACK_NODES = 8
 #: A face with fewer nodes of its own than this is estimated from every node: the nodes of its edges alone lie
-#: along curves (an arc, a line), and an estimate over them extrapolates across the face (a cylinder strip of
-#: a NIST part without nodes of its own: 93 mm off 70 mm up from the arc that held them).
+#: along curves (an arc, a line), and an estimate over them extrapolates across the face (on a cylinder strip
+#: without nodes of its own, far off the field away from the arc that holds them).
 _FACE_ESTIMATE_MIN = 10
 
 
@@ -800,18 +800,18 @@ class FaceGridder:
     def __call__(self, part: Part, faces: list[int] | None = None, slack: bool = True) -> list[FaceGrid]:
         """One :class:`FaceGrid` per face of ``part`` (of ``faces``, indices, if given), ``CHECK_SPACING`` x the part's
         diagonal apart and at least ``degree + 1`` per knot span (:func:`face_grid`): a refined face needs its own
-        grid, or its new spans are checked only where its hot spans were (NIST Geom: a plane refined 2x2 -> 5x5 was
-        7.8e-4 mm off the field on the grid of its bilinear surface, 1.9e-3 between).
+        grid, or its new spans are checked only where its hot spans were (a refined plane can meet the tolerance on
+        the grid of its bilinear hot surface and miss it between those points).
 
         On a face with at least ``_FACE_ESTIMATE_MIN`` nodes of its own, the points near its nodes (those of the face,
         its edges and its vertices; within ``GRID_REACH`` times their spacing, ``Classification.spacing``, which is
         that of the field around them: a plane with nodes only at its corners is near them only next to the corners,
-        not across its 150 mm, where the estimate was 0.014 mm off on the vise) are moved by a
+        not across its whole extent, where the estimate extrapolates) are moved by a
         :class:`~hot2cold.pipeline.artificial.FieldEstimator` over those nodes (the gridder's ``face_nodes``); the
         others by the gridder's ``estimator`` (over every node).  A thin wall's two sides are nearer each other than
-        the nodes' spacing, and an estimate over every node mixed the field of the far side in: on the bundled mixer
-        segment's 2.5 mm lobed walls, 6e-3 to 9e-3 mm off the face's own nodes.  Away from its own nodes, and where its
-        nodes lie only along its edges (an arc, a line), a face's own estimate extrapolates, and the estimate over
+        the nodes' spacing, and an estimate over every node mixes the field of the far side in, off the face's own
+        nodes by several times the tolerance.  Away from its own nodes, and where its nodes lie only along its
+        edges (an arc, a line), a face's own estimate extrapolates, and the estimate over
         every node, which has nodes all around, is the better one.  With ``elements`` (the gridder's: a field that
         brings its FE elements, :class:`~hot2cold.pipeline.artificial.ElementField`), the points on the FE model's
         boundary take the elements' own field instead, and all of them are near the nodes: the elements say where the
@@ -820,7 +820,7 @@ class FaceGridder:
         surface), so one set of grids serves it and the checks of the cold part. The faces are gridded in up to the
         gridder's ``threads`` threads.  ``slack=False``: the slack of the points near the face's own nodes is left NaN
         (G1's trial refinement measures distances from ``expected`` only, and most trials are not taken;
-        :func:`with_slack` finds it later): 78 % of the time of the grid of Rotor 37's largest face with 1 M nodes."""
+        :func:`with_slack` finds it later): the slack is most of the time of a large face's grid."""
         face_nodes, projector = self.face_nodes, self.projector
         estimator, elements = self.estimator, self.elements
         find_slack = slack                   # (the grid's ``slack`` array below is another thing)
@@ -897,8 +897,8 @@ class EdgeGrid:
 
 
 #: An edge is measured between its nodes where its own nodes are fewer than this many times its poles: an edge
-#: its nodes just determine interpolates them and may wander between (a NIST Geom circle 4.1 m round, 7 nodes
-#: for 7 poles, 3.3e-3 mm off the field between them, and its face with it).
+#: its nodes just determine interpolates them and may wander between (a long circle with as many nodes as
+#: poles, off the field between them by more than the tolerance, and its face with it).
 EDGE_REDUNDANCY = 2
 
 
@@ -976,11 +976,10 @@ def check_cold(part: Part, rebuilt: Rebuilt, projector: Projector, scale: FieldS
     which the share of each face's grid left unmeasured is found (:meth:`FaceGrid.unmeasured`).
 
     The last is the kernel's self-interference test (:func:`~hot2cold.kernel.validity.self_intersections`),
-    1 to 3 s on the bundled real parts, so it is run only where a gap of the part may have closed: two
-    points of the grids closer than two sample spacings in the cold part that were more than twice as far
-    apart, and a sample spacing farther, in the hot one.  A field moves a part as the FE solution says, and
-    nearby points of a part stay about as far apart as they were; where two sides of a gap come together,
-    their points do not.
+    slow on real parts, so it is run only where a gap of the part may have closed: two points of the grids
+    closer than two sample spacings in the cold part that were more than twice as far apart, and a sample
+    spacing farther, in the hot one.  A field moves a part as the FE solution says, and nearby points of a part
+    stay about as far apart as they were; where two sides of a gap come together, their points do not.
     """
     problems = _volume_problems(rebuilt.hot_checks, rebuilt.cold_checks, scale)
     spacing = CHECK_SPACING * part.diagonal
@@ -1079,8 +1078,8 @@ def _between(fm: FaceMorph, expected: np.ndarray, uv: np.ndarray, box: np.ndarra
     ``uv (m, 2)`` to the cold face, and the index of the largest.  Foot points by Newton's method from ``uv``
     within ``box``; where that does not settle, the smallest distance met by Gauss-Newton steps from ``uv``,
     from the tangent plane where the point has slid past the box's border
-    (:func:`~hot2cold.core.footpoint.surface_distances`; on NIST parts the distance to the cold point at the
-    same parameters read 1.0 mm where the face was 1e-4 mm off)."""
+    (:func:`~hot2cold.core.footpoint.surface_distances`; the distance to the cold point at the same parameters
+    reads the slide along the face, many times the true distance, wherever the face's parameters slid)."""
     fp = project_to_surface(fm.surface, expected, uv, box)
     off = fp.distance.copy()
     if not fp.settled.all():

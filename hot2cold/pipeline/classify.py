@@ -46,11 +46,10 @@ START_SPACING = 1 / 150
 #: The sample points that name each node's candidate faces (:func:`_face_cloud`) lie about the spacing of the
 #: start grids apart, or closer, down to ``CLOUD_FINEST`` of the diagonal, where the nodes are more than
 #: ``CLOUD_NODES`` times as many as the samples would be: a node's candidates are the faces with a sample
-#: within two spacings of its nearest sample, and each pair of node and face costs a projection.  On the thin
-#: Rotor 37 blade, samples 1/150 of the diagonal apart named 1.43 M pairs for its 0.98 M nodes (both sides
-#: of the blade for many), 1/300 apart 1.16 M, for 80 000 samples instead of 23 000.  With fewer nodes the
-#: samples' own cost (each one's trim state asked of the kernel) outweighs what they save: at 10 000 nodes
-#: 1/300 took classification from 0.53 to 0.74 s.
+#: within two spacings of its nearest sample, and each pair of node and face costs a projection.  On a thin
+#: blade under many nodes, samples at the start grids' spacing name both sides of the blade for many nodes,
+#: and finer ones save more projections than they cost.  With fewer nodes the samples' own cost (each one's
+#: trim state asked of the kernel) outweighs what they save, hence the finer spacing only past ``CLOUD_NODES``.
 CLOUD_FINEST, CLOUD_NODES = 1 / 300, 10
 #: Most sample points of the cloud along a face's parameter direction.
 _CLOUD_MOST = 400
@@ -102,9 +101,9 @@ def start_grid(face, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     product (:func:`~hot2cold.core.bspline.grid_points`).
 
     A node starts at the nearest of them, which must lie on the node's own side of a thin trailing edge:
-    with Rotor 37's trailing edge (about 0.3 mm thick) sampled 0.7 mm apart, a node's nearest start could be
-    on the far side, and Newton settled there, 0.27 mm off instead of 0.05 mm.  (These grids are not used
-    to name the candidate faces: a densely sampled face would crowd its neighbours out of a node's nearest
+    with a trailing edge sampled more coarsely than it is thick, a node's nearest start can be on the far
+    side, and Newton settles there, on a foot point several times farther than its own.  (These grids are not
+    used to name the candidate faces: a densely sampled face would crowd its neighbours out of a node's nearest
     samples.)
     """
     surface = face.surface
@@ -299,9 +298,9 @@ def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, 
 
     The start grid is dense across a bend but not along it (a trailing edge's spacing across is its radius,
     along it the plain spacing): a node well off the surface next to a thin edge, nearer to a grid line
-    of the far side than to one of its own, started there and settled on the far side's minimum (the
-    trimmed blade of ``tests/test_g1_trimmed.py``, nodes 0.07-0.1 mm off a trailing edge thinner than that:
-    30 foot points up to 0.023 mm farther than the nearest)."""
+    of the far side than to one of its own, started there and settled on the far side's minimum (nodes off a
+    trailing edge by more than its thickness, as in ``tests/test_g1_trimmed.py``: foot points farther than the
+    nearest)."""
     surface = face.surface
     grid, grid_uv, tree = start
     k = min(_FAR_SIDE_STARTS, len(grid))
@@ -434,8 +433,8 @@ def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classific
     group's) they lie on (``rows``, in place).
 
     A node on a corner or an edge is on every face there, but its foot point on each may be classified
-    outside when the face's pcurves miss the vertex by more than the classifier's tolerance (the vise's
-    vertex 335: the node 5e-10 mm from it, outside both faces).  Such a node still fixes the vertex.
+    outside when the face's pcurves miss the vertex by more than the classifier's tolerance (a node a rounding
+    error from the vertex, yet outside both faces there).  Such a node still fixes the vertex.
     """
     part, boundary, projector, edge_distance = reach.part, reach.boundary, reach.projector, reach.edge
     role, owner, uv, t, foot, distance = rows.arrays()

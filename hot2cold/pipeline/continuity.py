@@ -41,15 +41,16 @@ log = logging.getLogger(__name__)
 #: Rounds of the G1 correction at the most: each round freezes the faces the last one moved off their nodes.
 _G1_ROUNDS = 3
 #: A face fitted again with its tangents turned along a trimming curve may be this share farther from the field
-#: than its plain fit, or this share of the tolerance (issue 15: G1 at no more than 10 % of the plain fit's
-#: error); a face turned within the tolerance alone went several times farther off the exact cold geometry.
+#: than its plain fit, or this share of the tolerance: G1 may cost the fit only a small part of its accuracy,
+#: and a face allowed to turn as far as the tolerance alone goes several times farther off the exact cold
+#: geometry.
 _TURN_SHARE = 0.1
 #: How far a face turned by G1, or its second rows moved, may go from the field.
 _TURNING = Allowance("turning", _TURN_SHARE)
 #: How far a face bent by G2 (which the user asks for) may go from the field: up to the tolerance.
 _BENDING = Allowance("bending", _TURN_SHARE, 1.0)
 #: The largest kink (degrees) above its hot angle a correction may leave on a tangent edge that it finds less
-#: kinked (issue 15's promise): the second rows (G1) and a face bent to a common curvature (G2).
+#: kinked (the G1 accuracy the morph promises): the second rows (G1) and a face bent to a common curvature (G2).
 _KINK_PROMISE_DEG = 0.01
 #: Rounds of refinement for G1 at the most (:func:`smooth_g1`), each halving the patches along the edges still
 #: kinked.

@@ -135,17 +135,17 @@ def _artificial_parameters(surface: BSplineSurface, uv: np.ndarray,
     ``(p + 1)(q + 1)`` of the data parameters ``uv`` takes all of its candidates: the paper puts one node at
     the centre of an empty patch, but one node cannot fix the ``(p + 1)(q + 1)`` coefficients of a patch's
     polynomial piece.  Elsewhere a candidate is taken where its cell holds no data: nodes bunched in one end
-    of a patch leave the polynomial piece free at the other (as on Rotor 67's degree-14 hub and casing edges,
-    :func:`hot2cold.pipeline.edge_fit._artificial_parameters`, whose error its blade faces took through their
-    tied side rows: 0.07 mm under a field of 0.008 mm), and where ``trimmed_away(uv) -> (m,) bool`` puts it
+    of a patch leave the polynomial piece free at the other (as on high-degree hub and casing edges,
+    :func:`hot2cold.pipeline.edge_fit._artificial_parameters`, whose error the faces take through their tied
+    side rows, many times the field itself), and where ``trimmed_away(uv) -> (m,) bool`` puts it
     outside the face's trimmed domain, so the surface follows the field's continuation there instead of
     wandering.
 
     The points on the sides hold the outermost strip of the untrimmed surface: without them the last row of
     poles of a trimmed side is fixed only by extrapolating the polynomial piece from the cell centres inside
-    the span.  On Rotor 37 with its CalculiX field that strip turned the aerofoil faces' normals by up to 16
-    degrees against the hot ones (the leading-edge face even lost three singular values to the cut-off of
-    eq. 20), against 1.2 to 2.4 degrees with them (the field itself turns them by up to 1.5 degrees).
+    the span.  Without them that strip turns a trimmed face's normals far beyond what the field turns them, and
+    a thin face may lose singular values to the cut-off of eq. 20; with them the normals turn about as the
+    field does.
     """
     p, q = surface.u_degree, surface.v_degree
     ub = knot_breaks(surface.u_knots, p)
@@ -176,10 +176,9 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
     and the grid's lines on the sides, at least as many per direction as poles, one in every pole's support).
 
     The face fit's truncated SVD keeps this in the directions it drops.  The estimate at the poles
-    themselves would do for an affine field only: a high-degree surface's poles lie far off it (Rotor 67's
-    degree-14 blade face: 500 to 780 mm in its last span), where the local estimate of a curved field is no
-    estimate of what those poles need (0.4 mm there against the 0.05 mm of the best fit).  The same held for
-    its edges (:func:`hot2cold.pipeline.edge_fit._field_prior`), where it cost 0.07 mm.
+    themselves would do for an affine field only: a high-degree surface's poles lie far off it (hundreds of mm
+    in a last span), where the local estimate of a curved field is no estimate of what those poles need, many
+    times off the best fit there.  The same holds for its edges (:func:`hot2cold.pipeline.edge_fit._field_prior`).
     """
     p, q = surface.u_degree, surface.v_degree
     tu = span_cells(knot_breaks(surface.u_knots, p), p)[0]

@@ -203,10 +203,9 @@ def hot_defined(part: Part, faces: tuple[int, int], uv_a: np.ndarray, uv_b: np.n
     """``(m,)`` bool: where both hot faces have a normal at the matching points ``uv_a``, ``uv_b`` (m, 2) that
     rounding turns by at most :data:`MEASURABLE_DEG` (:func:`~hot2cold.core.bspline.normal_rounding`).  A
     collapsed side (a sphere's pole, a cone's apex) stays collapsed after the morph only to rounding, where a
-    cold normal is noise: on a SolidWorks part, 76 deg between tangent faces at such a point (|S_v| 6e-9 mm
-    against |S_u| 907); so is one collapsed all but to rounding: the vise's sliver faces read 0.61 and 0.12
-    deg at a corner (|S_u| 1e-7 mm against |S_v| 25), within 6e-6 mm of it.  Measures of the morphed faces
-    leave those points out."""
+    cold normal is noise and tangent faces can read any angle; so is one collapsed all but to rounding (a
+    sliver face's corner, one first derivative vanishingly short against the other), where the noise reads as
+    a kink far above what G1 keeps to.  Measures of the morphed faces leave those points out."""
     uv_a, uv_b = (np.asarray(uv, dtype=float).reshape(-1, 2) for uv in (uv_a, uv_b))
     return hot_measurable(part, [(faces[0], uv_a)], [(faces[1], uv_b)])[0]
 
@@ -972,8 +971,8 @@ def _least_change(rows: list[tuple[int, np.ndarray, float]]) -> tuple[list[int],
 
     Two rows on one pole (an edge of three poles constrained at both ends) whose planes are nearly one plane
     are one condition: their small singular value (ratio ``tan(angle / 2)``) is dropped below
-    ``_MIN_CORNER_DEG``, or the pole would move by their small disagreement over that small angle (on a
-    SolidWorks part, 9 mm for corners of 5e-4 degrees, and the faces folded)."""
+    ``_MIN_CORNER_DEG``, or the pole would move by their small disagreement over that small angle: far, and
+    the faces fold."""
     poles_at = sorted({pole for pole, _, _ in rows})
     a = np.zeros((len(rows), 3 * len(poles_at)))
     b = np.array([rhs for _, _, rhs in rows])

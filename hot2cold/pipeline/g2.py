@@ -39,12 +39,13 @@ log = logging.getLogger(__name__)
 #: How an edge's curvature jump was corrected (``G1Report.g2_reason``).
 BENT = "faces fitted again with a common curvature across the edge"
 #: Weights of the rows of :func:`bend_rows` in a face's fit, against the FE nodes' (1 each; rows in mm), tried in
-#: turn while the jumps stay above the tolerance and the faces may bend.  At 10 from the start, the trimmed blade's
-#: sides bent at their 0.06 mm trailing edge turned 0.3 deg there; at 0.1 they meet the tolerance.
+#: turn while the jumps stay above the tolerance and the faces may bend.  The lightest comes first: a heavy weight
+#: from the start kinks faces bent at a thin trailing edge far beyond the 0.01 deg G1 keeps to, where a light one
+#: already meets the tolerance.
 BEND_WEIGHTS = (0.1, 1.0, 10.0)
-#: Weight of the tangent rows (:func:`hot2cold.pipeline.g1.turn_rows`) beside them in the same fit: with 10, as
-#: in G1 alone, the trimmed blade's sides bent to a common curvature kinked 0.011 to 0.025 deg; with 100, 0.0071
-#: and 0.0070 deg with the curvature jumps at 0.059 and 0.021 %.
+#: Weight of the tangent rows (:func:`hot2cold.pipeline.g1.turn_rows`) beside them in the same fit, above G1's
+#: own (:data:`hot2cold.pipeline.g1.TURN_WEIGHT`): at G1's weight the faces bent to a common curvature kink beyond
+#: the 0.01 deg G1 keeps to; at this one both the kink and the curvature jump stay within their tolerances.
 TANGENT_WEIGHT = 100.0
 
 

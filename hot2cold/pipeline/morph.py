@@ -157,8 +157,8 @@ def smoothing_noise(scatter: float, settings: Settings) -> float:
 
 #: A field that scatters about a smooth field by more than this share of the tolerance is noisy: it is said
 #: (an info line), and it is not taken inside its FE elements (:func:`~.load.element_points`): the points
-#: would carry its noise, and their rows cost what the smoothed fits cannot use (the bundled mixer's noisy
-#: field of every node ran out of 8 GB with them; the twisted blade's took 20 minutes).
+#: would carry its noise, and their rows cost what the smoothed fits cannot use (a noisy field of every node,
+#: volume nodes included, runs out of memory or time with them).
 NOISY_SHARE = 0.1
 
 

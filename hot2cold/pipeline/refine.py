@@ -72,28 +72,22 @@ REFINED_DEGREE = 3
 MIN_SPAN_SPACINGS = 1.0
 
 #: Refinement aims at this share of the tolerance (plus the noise allowance) at the nodes, so that the cold part
-#: keeps within the tolerance between them too: Rotor 37's pressure side, 9.9e-4 mm at the points of its
-#: field (nodes and points inside the elements), was 1.01e-3 against the FE geometry on samples 0.5 mm apart.
-#: The tolerance itself is what the report checks.
+#: keeps within the tolerance between them too: a face refined until it just meets the tolerance at the points
+#: of its field can still miss it slightly between them.  The tolerance itself is what the report checks.
 TARGET_SHARE = 0.9
 
 #: The same for a field sampled inside its FE elements (:func:`hot2cold.pipeline.load.element_points`): the
 #: elements' shape functions tell the field between the points, and the points' spacing, about a quarter
 #: of an element's edge, is no limit of what is known.  Spans down to a quarter of it let the faces next to a
-#: clamped face follow the steep field there: the bundled mixer's outer wall went from 1.07e-3 mm at its
-#: points (spans at one spacing, not refinable further) to 9.8e-4 at half a spacing; the twisted blade's caps,
-#: whose corner on the clamped flank sees the field go from 0 to 6e-3 mm within 0.8 mm, stopped 1.3e-3 mm
-#: from that vertex at half a spacing and met the tolerance at a quarter (7.4e-4).
+#: clamped face follow the steep field there: with spans no shorter than one spacing, or half of one, such a
+#: face can stop above the tolerance next to a vertex on the clamped face, where spans of a quarter meet it.
 MIN_SPAN_SPACINGS_ELEMENTS = 0.25
 
 #: A node that misses the limit is chased no more once a round that refined its face for it left its error
 #: above this share of what it was (halving the span at a miss of a smooth field cuts it by up to 16, the
-#: fourth power of the span for a cubic; at a kink of the field by half, in proportion to the span).
-#: Rotor 37's CalculiX field resampled onto 1 M nodes has nodes 1.8e-3 to 2.1e-3 mm off the quadratic through
-#: the 83 to 87 around them within 0.4 mm, which it meets within 2e-5 to 8e-5 mm (median; slips of the
-#: resampling): four rounds took the worst of them from 2.5e-3 to 2.0e-3 mm, and seven to 1.29e-3 by bending
-#: faces of 2 664 and 1 512 poles towards them, which kinked the tangent edges between those faces by 1.3 to
-#: 3.6 degrees.
+#: fourth power of the span for a cubic; at a kink of the field by half, in proportion to the span).  A node
+#: that lies off the smooth field of its neighbours (a slip of a resampled field) gains little from each round,
+#: and chasing it bends large faces towards it and kinks their tangent edges by degrees.
 STALL_SHARE = 0.9
 
 
@@ -185,9 +179,9 @@ class Targets:
         (``FaceGrid.near``), with the field's local estimate there, less the estimate's own miss at the
         nearest nodes (its ``slack``): the error between the nodes as far as the nodes tell.  Other faces are
         measured at their nodes: the estimate, a local quadratic, is no better than the fit where the nodes
-        determine the face, and worse where it reaches past the nodes (on the twisted blade, 1.2 mm into a
-        hole in the nodes it was 7e-3 mm off, and the face refined after it 6e-3 mm worse there than the fit
-        of the hot knots).
+        determine the face, and worse where it reaches past the nodes (into a hole in the nodes it is off by
+        several times the tolerance, and a face refined after it ends worse there than the fit of the hot
+        knots).
     between : (n_faces,) bool array, the faces measured on their grids: those whose nodes do not determine
         them with their hot knots (:func:`nodes_determine`), decided once, so that a face refined into more
         patches than its nodes fill is not measured against the estimate for that alone.
@@ -252,9 +246,9 @@ def nodes_determine(face: Face, classification: Classification) -> bool:
     """Whether the face's own nodes determine its shape between them: at least ``(p + 1)(q + 1)`` of them per
     knot-span patch on average, what a patch's polynomial piece needs (the rule by which a patch takes
     artificial nodes, :func:`hot2cold.pipeline.face_fit._artificial_parameters`).  With fewer the artificial
-    nodes, the field's estimate, set the shape between the nodes: Rotor 37's leading edge under 10 180 nodes
-    had 158 for its 126 poles in 66 patches (and 1185 artificial), met the tolerance at its nodes and was
-    1.8e-3 mm off the exact cold geometry between them.  Counting per patch also covers a face with fewer
+    nodes, the field's estimate, set the shape between the nodes: a face with more nodes than poles but fewer
+    than its patches need can meet the tolerance at its nodes and miss it against the exact cold geometry
+    between them.  Counting per patch also covers a face with fewer
     nodes than poles (a patch's piece has ``(p + 1)(q + 1)`` poles)."""
     surface = face.surface
     patches = ((len(knot_breaks(surface.u_knots, surface.u_degree)) - 1)
@@ -281,7 +275,7 @@ def noise_allowance(scatter: float, nodes: int) -> float:
     the nodes than their noise."""
     if scatter <= 0 or nodes <= 0:
         return 0.0
-    from scipy.special import ndtri          # the normal quantile (scipy.stats takes 0.6 s to import)
+    from scipy.special import ndtri          # the normal quantile (scipy.stats is slow to import)
 
     return float(-scatter * ndtri(0.25 / nodes))
 

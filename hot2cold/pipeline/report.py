@@ -284,8 +284,8 @@ class Report:
         every face's and edge's Δmax; between them: what the refinement measured there at the end (its grid
         points near the nodes of faces their nodes do not determine, its edges' gaps), for every face and edge
         it refined or found missing.  A face with no node of its own (a plane of a triangulation's vertices)
-        misses only between its nodes: NIST Geom's, 2.9 mm off the exact cold geometry after 8 rounds, had
-        been counted as met.  Empty when no tolerance was set."""
+        misses only between its nodes, and counted at its nodes alone it would pass as met however far off the
+        exact cold geometry it ends.  Empty when no tolerance was set."""
         if self.tolerance is None:
             return []
         limit = self.tolerance + self.allowance
@@ -300,9 +300,8 @@ class Report:
     def unsupported_faces(self) -> list[FaceReport]:
         """The faces more than :data:`UNSUPPORTED_SHARE` of whose area lies out of their nodes' reach, most
         first: there the cold face follows its edges and the field's estimate, and neither the tolerance nor
-        anything else measures it.  A plane of a triangulation's vertices has nodes only on its border: the
-        bundled filleted block's 50 mm cap, up to 25 mm from a node, met the tolerance where measured and was
-        3e-3 mm off the exact cold geometry in its middle."""
+        anything else measures it.  A plane of a triangulation's vertices has nodes only on its border: it can
+        meet the tolerance where measured and miss it against the exact cold geometry in its middle."""
         found = [f for f in self.faces if not math.isnan(f.unsupported) and f.unsupported > UNSUPPORTED_SHARE]
         return sorted(found, key=lambda f: -f.unsupported)
 

@@ -42,8 +42,8 @@ class MorphResult:
         over, a solid turned inside out or crossing itself; such solids are reported invalid), one line each;
         :func:`check_result` raises on them.
 
-    ``cold`` and ``hot`` are the parts as CadQuery shapes, made when first asked for (CadQuery and VTK take
-    about 1.5 s to import, which a morph on the command line does not need).
+    ``cold`` and ``hot`` are the parts as CadQuery shapes, made when first asked for (CadQuery and VTK are
+    slow to import, and a morph on the command line does not need them).
     """
 
     report: Report

@@ -687,10 +687,10 @@ def curvature_floor(result, fc: "FaceCurvature") -> float:
     """The noise floor (1/mm) of the curvatures of ``fc``: ``CURVATURE_NOISE * max(1 / diagonal, largest
     |H| of the face hot or cold)``; a curvature, or a change of curvature, smaller than it is drawn as 0.
 
-    Why both terms: on a plane the face's own largest |H| is the rounding noise itself (±1e-21 1/mm on the
-    bundled blade's flat caps), so a floor relative to it alone would draw noise as a full colour ramp; the
-    part's size sets an absolute floor instead -- a radius of curvature of 1e9 diagonals sags
-    5e-10 diagonals over the whole part, far below any tolerance, while rounding in H stays some 1e-16 of
+    Why both terms: on a plane the face's own largest |H| is the rounding noise itself, so a floor relative
+    to it alone would draw noise as a full colour ramp; the part's size sets an absolute floor instead -- a
+    radius of curvature of 1e9 diagonals sags 5e-10 diagonals over the whole part, far below any tolerance,
+    while rounding in H stays some 1e-16 of
     ``1 / size``.  On a strongly curved face rounding grows with |H|, hence the relative term, which still
     leaves a change of 1e-9 of the face's curvature visible."""
     largest = [np.nanmax(np.abs(v[fc.inside])) for v in (fc.hot, fc.cold)
