@@ -29,6 +29,7 @@ triangular solve ``R x = Q^T B``, the same least-squares solution.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -274,10 +275,13 @@ def reduce_rows(A, B, block_rows: int | None = None, block_bytes: int = BLOCK_BY
     return ReducedRows(factor, (s, n), float(np.sum(b2 * b2)), b.ndim == 1)
 
 
-def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,  # noqa: C901, PLR0913, PLR0915
+def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float = 0.0,  # noqa: PLR0913
                noisy_rows: int | None = None, steer: tuple | None = None, block_rows: int | None = None,
                block_bytes: int = BLOCK_BYTES, full_svd_up_to: int = FULL_SVD_UP_TO) -> TsvdSolution:
     """Solve ``min ||A x - B||`` by truncated SVD (eq. 19-20).
+
+    The keyword options are the solver's public interface, which the fits across the package set, so it takes
+    more than six parameters; the steps are the helpers named under Method.
 
     Parameters
     ----------
@@ -331,23 +335,126 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
     built block by block of rows (:func:`_triangular_factor`), without ever holding Q or all of ``A``, and
     then the SVD of the small ``R = U_R Sigma V^T`` is taken: since Q is orthogonal, ``A = (Q U_R) Sigma V^T``
     is an SVD of A with the same singular values, at the cost of an SVD of an n x n instead of an s x n
-    matrix; ``U^T B = U_R^T C``.  For a square or wide ``A`` the SVD is taken directly.  Singular values
-    ``sigma_i <= cutoff`` are dropped (with ``steer``, the rows ``E`` are reduced into the factor after those of
+    matrix; ``U^T B = U_R^T C`` (:func:`_tall_spectrum`).  For a square or wide ``A`` the SVD is taken
+    directly (:func:`_wide_spectrum`).  Singular values ``sigma_i <= cutoff`` are dropped
+    (:func:`_truncated_solution`; with ``steer``, the rows ``E`` are reduced into the factor after those of
     ``A``, the cut-off taken from ``A``'s, :func:`_sigma_max`).  With more than ``full_svd_up_to`` unknowns,
-    ``sigma_1`` and ``sigma_n``
-    of ``R`` are estimated first (:func:`_extremes`); where ``sigma_n > FULL_RANK_MARGIN * cutoff`` nothing
-    is dropped, and unless the noise asks for smoothing (the plain fit's residual ``||B||^2 - ||C||^2`` below
-    its target) ``x = R^-1 C``, the solution the SVD would give, by back substitution.
+    ``sigma_1`` and ``sigma_n`` of ``R`` are estimated first (:func:`_extremes`); where
+    ``sigma_n > FULL_RANK_MARGIN * cutoff`` nothing is dropped, and unless the noise asks for smoothing (the
+    plain fit's residual ``||B||^2 - ||C||^2`` below its target) ``x = R^-1 C``, the solution the SVD would
+    give, by back substitution (:func:`_full_rank`).
 
     Edge cases: ``n == 0`` gives an empty ``x`` (0, k); ``s == 0`` (no observations) gives ``x = 0`` with
     ``rank == 0``.  An all-zero ``A`` gives ``x = 0``, ``rank == 0``.
     """
+    options = _checked_options(epsilon, block_rows, block_bytes, full_svd_up_to)
+    problem = _checked_inputs(A, B, prior, steer)
+    if problem.empty:
+        return _empty_solution(problem, prior)
+    target = _noise_target(problem, noise, noisy_rows, prior)
+    spectrum = _tall_spectrum(problem, options, target) if problem.tall else _wide_spectrum(problem)
+    if isinstance(spectrum, TsvdSolution):           # clearly of full rank: solved without the SVD (_full_rank)
+        return replace(spectrum, x=problem.shaped(spectrum.x))
+    return _truncated_solution(problem, spectrum, options.epsilon, target, prior)
+
+
+@dataclass(frozen=True, eq=False)
+class _Options:
+    """The numerical options of :func:`solve_tsvd`, checked (:func:`_checked_options`).
+
+    Attributes
+    ----------
+    epsilon : float > 0, the machine-precision factor of the cut-off ``sigma_1 * n * epsilon`` (eq. 20), as
+        given.
+    block_rows : int > 0 or None, rows of ``A`` reduced at a time (:func:`_triangular_factor`).
+    block_bytes : int, memory budget of one dense block (of rows, and of ``A``'s check for NaN and inf).
+    full_svd_up_to : int >= 0, unknowns up to which a tall problem's triangular factor is always decomposed by
+        a full SVD (:func:`_full_rank` above).
+    """
+
+    epsilon: float
+    block_rows: int | None
+    block_bytes: int
+    full_svd_up_to: int
+
+
+def _checked_options(epsilon: float, block_rows: int | None, block_bytes: int, full_svd_up_to: int) -> _Options:
+    """:func:`solve_tsvd`'s ``epsilon``, ``block_rows``, ``block_bytes`` and ``full_svd_up_to`` as
+    :class:`_Options`, or ValueError."""
     if not (np.isfinite(epsilon) and epsilon > 0):
         raise ValueError(f"epsilon must be positive and finite, got {epsilon!r}")
     if block_rows is not None and block_rows < 1:
         raise ValueError(f"block_rows must be a positive number of rows, got {block_rows!r}")
     if full_svd_up_to < 0:
         raise ValueError(f"full_svd_up_to must be a number of unknowns >= 0, got {full_svd_up_to!r}")
+    return _Options(epsilon, block_rows, block_bytes, full_svd_up_to)
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The problem ``min ||A x - B||^2 + ||E x - F||^2`` of :func:`solve_tsvd`, checked and with its right-hand
+    sides as columns (:func:`_checked_inputs`).
+
+    Attributes
+    ----------
+    a : ``A`` (s, n), a dense array or ``scipy.sparse`` matrix/array (its entries are checked for NaN and inf
+        where they are read), or the :class:`ReducedRows` of a tall problem.
+    b : (s, k) float array, ``B``; None with :class:`ReducedRows` (which hold it in their factor).
+    shape : ``(s, n)``, the shape of ``A``.
+    b_shape : ``(s,)`` or ``(s, k)``, the shape of ``B`` as given (that of the prior and of ``x`` follow it).
+    extra : (m, n) float array or CSR array, the steering rows ``E``; no rows without ``steer``.
+    f : (m, k) float array, their right-hand sides ``F``.
+    """
+
+    a: object
+    b: np.ndarray | None
+    shape: tuple[int, int]
+    b_shape: tuple[int, ...]
+    extra: object
+    f: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """The number of unknowns."""
+        return self.shape[1]
+
+    @property
+    def vector(self) -> bool:
+        """``B`` was ``(s,)``: so is ``x``, ``(n,)``."""
+        return len(self.b_shape) == 1
+
+    @property
+    def k(self) -> int:
+        """The number of right-hand sides."""
+        return 1 if self.vector else self.b_shape[1]
+
+    @property
+    def reduced(self) -> ReducedRows | None:
+        """``A`` as :class:`ReducedRows`, or None."""
+        return self.a if isinstance(self.a, ReducedRows) else None
+
+    @property
+    def empty(self) -> bool:
+        """No rows (of data or steering) or no unknowns: nothing to decompose."""
+        return self.shape[0] + self.extra.shape[0] == 0 or self.n == 0
+
+    @property
+    def tall(self) -> bool:
+        """More rows than unknowns (always so for :class:`ReducedRows`): reduced to the triangular factor."""
+        return self.reduced is not None or self.shape[0] + self.extra.shape[0] > self.n
+
+    def shaped(self, x: np.ndarray) -> np.ndarray:
+        """A solution ``x`` (n, k) in the shape ``B`` had: ``(n,)`` for ``B`` (s,)."""
+        return x[:, 0] if self.vector else x
+
+    def prior(self, prior) -> np.ndarray:
+        """``prior`` (an array, or a callable called here) checked, of shape ``(n,) + b_shape[1:]``."""
+        return _checked_prior(prior, self.shape, self.b_shape)
+
+
+def _checked_inputs(A, B, prior, steer) -> _Problem:
+    """:func:`solve_tsvd`'s ``A``, ``B`` (or :class:`ReducedRows` and None), an array ``prior`` and ``steer``
+    checked, as a :class:`_Problem`; or ValueError.  A callable prior is checked where it is called."""
     reduced = A if isinstance(A, ReducedRows) else None
     if reduced is not None:
         if B is not None:
@@ -359,92 +466,188 @@ def solve_tsvd(A, B, epsilon: float = FLT_EPSILON, *, prior=None, noise: float =
         (s, n), b_shape = A.shape, b.shape
     if prior is not None and not callable(prior):
         _checked_prior(prior, (s, n), b_shape)
-
-    vector = len(b_shape) == 1
-    k = 1 if vector else b_shape[1]
+    k = 1 if len(b_shape) == 1 else b_shape[1]
     b2 = None if reduced is not None else b.reshape(s, k)
     extra, f = _checked_steer(steer, n, k)
+    return _Problem(A, b2, (s, n), b_shape, extra, f)
 
-    if s + extra.shape[0] == 0 or n == 0:
-        x = np.zeros((n, k))
-        if prior is not None and n:
-            x = _checked_prior(prior, (s, n), b_shape).reshape(n, k).copy()
-        return TsvdSolution(x=x[:, 0] if vector else x, rank=0, n_unknowns=n, condition=float("nan"),
-                            sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
+
+def _empty_solution(problem: _Problem, prior) -> TsvdSolution:
+    """The solution of a problem without rows or unknowns (:attr:`_Problem.empty`): ``x`` (n, k) the prior
+    where one is given, else 0, with ``rank == 0``."""
+    n, k = problem.n, problem.k
+    x = np.zeros((n, k))
+    if prior is not None and n:
+        x = problem.prior(prior).reshape(n, k).copy()
+    return TsvdSolution(x=problem.shaped(x), rank=0, n_unknowns=n, condition=float("nan"),
+                        sigma_max=0.0, sigma_min=0.0, cutoff=0.0, singular_values=np.zeros(0))
+
+
+def _noise_target(problem: _Problem, noise: float, noisy_rows: int | None, prior) -> float | None:
+    """The residual ``||A x - B||^2`` the noise alone leaves, ``noisy_rows * k * noise^2`` (``noisy_rows``
+    default s), which the smoothing towards the prior aims at (:func:`_smoothed`); None where no smoothing is
+    asked for (no noise, or no prior)."""
     smoothing = noise > 0 and prior is not None
-    target = (s if noisy_rows is None else noisy_rows) * k * float(noise) ** 2   # the residual the noise leaves
-    scale = None                                  # sigma_1 of the data's A where steering rows are added
-    if reduced is not None or s + extra.shape[0] > n:
-        steering = _Rows(extra, n, block_bytes) if extra.shape[0] else None
-        if reduced is None:
-            rows = _Rows(A, n, block_bytes)     # checks A for NaN and inf
+    target = (problem.shape[0] if noisy_rows is None else noisy_rows) * problem.k * float(noise) ** 2
+    return target if smoothing else None
 
-            def data() -> np.ndarray:
-                return _triangular_factor(rows, b2, n, block_rows, block_bytes)
 
-            total = float(np.sum(b2 * b2))
-        else:
-            def data() -> np.ndarray:           # copied only where steering rows are reduced into it in place
-                return reduced.factor if steering is None else reduced.factor.copy()
+@dataclass(frozen=True, eq=False)
+class _Factor:
+    """A tall problem reduced to its triangular factor (:func:`_triangular_factor`), as :func:`_full_rank`
+    takes it.
 
-            total = reduced.square_sum
+    Attributes
+    ----------
+    r : (n, n) float array, ``R``, upper triangular.
+    c : (n, k) float array, ``C``, the first n rows of ``Q^T [B; F]``.
+    total : float, ``||B||^2 + ||F||^2``, the right-hand side's square sum.
+    scale : float or None, ``sigma_1`` of the data's own ``A`` where steering rows were added (the scale of the
+        cut-off), else None (``R``'s own).
+    """
 
-        def factor() -> tuple[np.ndarray, float | None]:
-            """``[R | C]`` of ``[A | B; E | F]``, and ``sigma_1`` of ``A``'s own ``R`` with steering rows."""
-            rc = data()
-            if steering is None:
-                return rc, None
-            try:
-                top = _sigma_max(rc[:, :n])
-            except scipy.sparse.linalg.ArpackError:                  # the dense way, at the SVD's cost
-                top = float(scipy.linalg.svdvals(rc[:, :n], check_finite=False)[0])
-            return _triangular_factor(steering, f, n, block_rows, block_bytes, start=rc), top or None
+    r: np.ndarray
+    c: np.ndarray
+    total: float
+    scale: float | None
 
-        rc, scale = factor()
-        total += float(np.sum(f * f))
-        if n > full_svd_up_to:
-            fast = _full_rank(rc[:, :n], rc[:, n:], total, epsilon, smoothing, target, scale)
-            if fast is not None:
-                return replace(fast, x=fast.x[:, 0] if vector else fast.x)
-        # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
-        # factors, and a copy of R and the augmented factor beside it would add 2 n^2 more
-        r, c = np.asfortranarray(rc[:, :n]), rc[:, n:].copy()
-        del rc
-        try:
-            ur, sigma, vt = _svd(r, overwrite=True)
-        except np.linalg.LinAlgError:                     # R once more for the slower driver
-            ur, sigma, vt = _svd(factor()[0][:, :n])
-        utb = ur.T @ c
-        del ur, r, c                                      # not held while the prior is solved
+
+@dataclass(frozen=True, eq=False)
+class _Spectrum:
+    """The SVD ``[A; E] = U Sigma V^T`` of a problem, as far as the truncated solution needs it (eq. 19-20):
+    ``p = min(s + m, n)`` singular triplets, ``U`` only as ``U^T [B; F]``.
+
+    Attributes
+    ----------
+    sigma : (p,) float array, the singular values, from largest to smallest.
+    vt : (p, n) float array, ``V^T``, the right singular vectors as rows.
+    utb : (p, k) float array, ``U^T [B; F]``.
+    total : float, ``||B||^2 + ||F||^2``, the right-hand side's square sum.
+    scale : float or None, ``sigma_1`` of the data's own ``A`` where steering rows were added (the scale of the
+        cut-off), else None (``sigma[0]``).
+    """
+
+    sigma: np.ndarray
+    vt: np.ndarray
+    utb: np.ndarray
+    total: float
+    scale: float | None
+
+    def cut(self, n: int, epsilon: float) -> tuple[float, int]:
+        """``(cutoff, rank)``: the cut-off ``sigma_1 * n * epsilon`` (eq. 20; ``sigma_1`` the scale where
+        steering rows were added) and the number of singular values above it, the first ``rank``."""
+        cutoff = float(self.sigma[0] if self.scale is None else self.scale) * n * float(epsilon)
+        keep = self.sigma > cutoff
+        return cutoff, int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
+
+
+def _tall_spectrum(problem: _Problem, options: _Options, target: float | None) -> _Spectrum | TsvdSolution:
+    """The SVD of a tall problem (:attr:`_Problem.tall`) by way of its triangular factor ``[R | C]``
+    (:func:`_factorization`): ``R = U_R Sigma V^T`` (n, n), ``U^T B = U_R^T C``.  Above
+    ``options.full_svd_up_to`` unknowns, the solution itself (``x`` (n, k)) where :func:`_full_rank` finds the
+    problem clearly of full rank and ``target`` (:func:`_noise_target`) asks for no smoothing."""
+    n = problem.n
+    factor, total = _factorization(problem, options)
+    rc, scale = factor()
+    total += float(np.sum(problem.f * problem.f))
+    if n > options.full_svd_up_to:
+        fast = _full_rank(_Factor(rc[:, :n], rc[:, n:], total, scale), options.epsilon, target)
+        if fast is not None:
+            return fast
+    # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
+    # factors, and a copy of R and the augmented factor beside it would add 2 n^2 more
+    r, c = np.asfortranarray(rc[:, :n]), rc[:, n:].copy()
+    del rc
+    try:
+        ur, sigma, vt = _svd(r, overwrite=True)
+    except np.linalg.LinAlgError:                     # R once more for the slower driver
+        ur, sigma, vt = _svd(factor()[0][:, :n])
+    return _Spectrum(sigma, vt, ur.T @ c, total, scale)    # R, C and U_R not held while the prior is solved
+
+
+def _factorization(problem: _Problem, options: _Options
+                   ) -> tuple[Callable[[], tuple[np.ndarray, float | None]], float]:
+    """``(factor, total)`` of a tall problem.  ``factor()`` returns ``([R | C], scale)``: ``[R | C]`` (n, n + k)
+    the QR factor of ``[A | B; E | F]`` (:func:`_triangular_factor`; the steering rows reduced after the data's,
+    into :class:`ReducedRows`' factor as it is where there are none) and ``scale`` the data's ``sigma_1``
+    (:func:`_data_scale`) where steering rows were added, else None.  It may be called a second time (the SVD's
+    fallback, :func:`_tall_spectrum`).  ``total`` is ``||B||^2``."""
+    n, block_rows, block_bytes = problem.n, options.block_rows, options.block_bytes
+    steering = _Rows(problem.extra, n, block_bytes) if problem.extra.shape[0] else None
+    reduced = problem.reduced
+    if reduced is None:
+        rows = _Rows(problem.a, n, block_bytes)     # checks A for NaN and inf
+
+        def data() -> np.ndarray:
+            return _triangular_factor(rows, problem.b, n, block_rows, block_bytes)
+
+        total = float(np.sum(problem.b * problem.b))
     else:
-        a = A.toarray() if scipy.sparse.issparse(A) else A
-        a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"A {a.shape} holds NaN or inf")
-        if extra.shape[0]:
-            scale = (float(scipy.linalg.svdvals(a, check_finite=False)[0]) if s else 0.0) or None
-            e = extra.toarray() if scipy.sparse.issparse(extra) else np.array(extra, dtype=float)
-            a, b2 = np.vstack([a, e]), np.vstack([b2, f])
-        total = float(np.sum(b2 * b2))
-        u, sigma, vt = _svd(a)
-        utb = u.T @ b2
-        del u, a
+        def data() -> np.ndarray:           # copied only where steering rows are reduced into it in place
+            return reduced.factor if steering is None else reduced.factor.copy()
 
-    cutoff = float(sigma[0] if scale is None else scale) * n * float(epsilon)
-    keep = sigma > cutoff
-    rank = int(np.count_nonzero(keep))  # sigma is descending, so the kept ones are the first `rank`
+        total = reduced.square_sum
+
+    def factor() -> tuple[np.ndarray, float | None]:
+        """``[R | C]`` of ``[A | B; E | F]``, and ``sigma_1`` of ``A``'s own ``R`` with steering rows."""
+        rc = data()
+        if steering is None:
+            return rc, None
+        top = _data_scale(rc[:, :n])         # before the steering rows are reduced into rc in place
+        return _triangular_factor(steering, problem.f, n, block_rows, block_bytes, start=rc), top or None
+
+    return factor, total
+
+
+def _data_scale(r: np.ndarray) -> float:
+    """``sigma_1`` of the data's own triangular factor ``r`` (n, n), the scale of the cut-off where steering
+    rows are added: by Lanczos iteration (:func:`_sigma_max`), by the dense singular values where ARPACK
+    fails."""
+    try:
+        return _sigma_max(r)
+    except scipy.sparse.linalg.ArpackError:                  # the dense way, at the SVD's cost
+        return float(scipy.linalg.svdvals(r, check_finite=False)[0])
+
+
+def _wide_spectrum(problem: _Problem) -> _Spectrum:
+    """The SVD of a square or wide problem (``s + m <= n``), taken directly of a dense copy of ``[A; E]``
+    ((s + m, n)); the cut-off's scale is the data's ``sigma_1`` where steering rows are added."""
+    A, s, extra = problem.a, problem.shape[0], problem.extra
+    a = A.toarray() if scipy.sparse.issparse(A) else A
+    a = np.array(a, dtype=float)  # a private copy: the SVD may overwrite it
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"A {a.shape} holds NaN or inf")
+    b2, scale = problem.b, None
+    if extra.shape[0]:
+        scale = (float(scipy.linalg.svdvals(a, check_finite=False)[0]) if s else 0.0) or None
+        e = extra.toarray() if scipy.sparse.issparse(extra) else np.array(extra, dtype=float)
+        a, b2 = np.vstack([a, e]), np.vstack([b2, problem.f])
+    total = float(np.sum(b2 * b2))
+    u, sigma, vt = _svd(a)
+    return _Spectrum(sigma, vt, u.T @ b2, total, scale)
+
+
+def _truncated_solution(problem: _Problem, spectrum: _Spectrum, epsilon: float, target: float | None,
+                        prior) -> TsvdSolution:
+    """The truncated-SVD solution (eq. 19-20) of ``problem`` from its ``spectrum``: the singular values above
+    the cut-off kept, ``x = V_r Sigma_r^-1 U_r^T B`` (n, k) plus the prior's component in the dropped
+    directions, ``(I - V_r V_r^T) prior``; or, where ``target`` (:func:`_noise_target`) asks for it, smoothed
+    towards the prior (:func:`_smoothed`)."""
+    n, k = problem.n, problem.k
+    sigma, vt, utb = spectrum.sigma, spectrum.vt, spectrum.utb
+    cutoff, rank = spectrum.cut(n, epsilon)
     lam = 0.0
-    if smoothing and rank:
-        lam, x = _smoothed(sigma, rank, vt, utb, total, target, lambda: _checked_prior(prior, (s, n), b_shape))
+    if target is not None and rank:
+        lam, x = _smoothed(spectrum, rank, target, lambda: problem.prior(prior))
     else:
         x = None
     if x is None:
         x = vt[:rank].T @ (utb[:rank] / sigma[:rank, None])
         if prior is not None and rank < n:
-            x0 = _checked_prior(prior, (s, n), b_shape).reshape(n, k)
+            x0 = problem.prior(prior).reshape(n, k)
             x += x0 - vt[:rank].T @ (vt[:rank] @ x0)
     condition = float(sigma[0] / sigma[rank - 1]) if rank else float("nan")
-    return TsvdSolution(x=x[:, 0] if vector else x, rank=rank, n_unknowns=n, condition=condition,
+    return TsvdSolution(x=problem.shaped(x), rank=rank, n_unknowns=n, condition=condition,
                         sigma_max=float(sigma[0]), sigma_min=float(sigma[-1]), cutoff=cutoff,
                         singular_values=sigma, smoothing=lam)
 
@@ -522,20 +725,21 @@ def _checked_steer(steer, n: int, k: int) -> tuple:
     return extra, f
 
 
-def _full_rank(r: np.ndarray, c: np.ndarray, total: float, epsilon: float, smoothing: bool,  # noqa: PLR0913
-               target: float, scale: float | None = None) -> TsvdSolution | None:
-    """The solution ``R^-1 C`` (x ``(n, k)``) of the tall problem whose QR factors are ``r`` (n, n) and ``c``
-    (n, k) (the right-hand side's square sum ``total``) where nothing falls below the cut-off, with a margin,
-    and no smoothing towards the prior is due (``smoothing`` asked for and the residual below ``target``);
-    else None (the SVD decides).  The cut-off is ``scale n epsilon``, ``scale`` the data's ``sigma_1`` where
-    steering rows were added (:func:`solve_tsvd`), else ``r``'s own.  The diagonal bounds the singular values
-    of a triangular matrix (``sigma_n <= min |r_ii|``, ``sigma_1 >= max |r_ii|``), so a diagonal entry at or
-    below the cut-off (with ``max |r_ii|`` for ``sigma_1``) is a dropped direction without any iteration."""
+def _full_rank(factor: _Factor, epsilon: float, target: float | None) -> TsvdSolution | None:
+    """The solution ``R^-1 C`` (x ``(n, k)``) of a tall problem reduced to ``factor`` (``R`` (n, n), ``C``
+    (n, k), the right-hand side's square sum ``total``) where nothing falls below the cut-off, with a margin,
+    and no smoothing towards the prior is due (a ``target`` given, :func:`_noise_target`, and the residual
+    below it); else None (the SVD decides).  The cut-off is ``scale n epsilon`` (eq. 20), ``scale`` the data's
+    ``sigma_1`` where steering rows were added (:func:`solve_tsvd`), else ``R``'s own.  The diagonal bounds the
+    singular values of a triangular matrix (``sigma_n <= min |r_ii|``, ``sigma_1 >= max |r_ii|``), so a
+    diagonal entry at or below the cut-off (with ``max |r_ii|`` for ``sigma_1``) is a dropped direction without
+    any iteration."""
+    r, c, scale = factor.r, factor.c, factor.scale
     n = len(r)
     diagonal = np.abs(np.diag(r))
     if diagonal.min() <= FULL_RANK_MARGIN * (diagonal.max() if scale is None else scale) * n * epsilon:
         return None
-    if smoothing and _outside(total, c) < target:
+    if target is not None and _outside(factor.total, c) < target:
         return None
     try:
         sigma_max, sigma_min = _extremes(r)
@@ -559,23 +763,23 @@ def _outside(total: float, projected: np.ndarray) -> float:
     return max(total - float(np.sum(projected * projected)), 0.0)
 
 
-def _smoothed(sigma: np.ndarray, rank: int, vt: np.ndarray, utb: np.ndarray, total: float, target: float,  # noqa: PLR0913
-              prior) -> tuple[float, np.ndarray | None]:
+def _smoothed(spectrum: _Spectrum, rank: int, target: float, prior) -> tuple[float, np.ndarray | None]:
     """The Tikhonov solution towards ``prior() (n, k)`` whose residual is ``target``, and its ``lambda``:
     ``(0, None)`` where the plain truncated fit leaves ``target`` or more already.
 
-    ``sigma (m,)`` are the singular values (the first ``rank`` kept), ``vt (m, n)`` and ``utb (m, k)`` the
-    SVD's right vectors and ``U^T B``, ``total`` the right-hand side's square sum ``||B||^2``.  With
+    ``spectrum`` holds the singular values ``sigma (p,)`` (the first ``rank`` kept), the SVD's right vectors
+    ``vt (p, n)`` and ``utb = U^T B (p, k)``, and the right-hand side's square sum ``total = ||B||^2``.  With
     ``c = U^T (B - A x0)`` (``c_i = (U^T B)_i - sigma_i (V^T x0)_i``), ``x = x0 + sum_i f_i c_i / sigma_i v_i``
     over the kept directions (the prior in the dropped ones) leaves ``||B||^2 - ||U^T B||^2`` (outside the
     range of ``A``), the dropped ``c_i``, and ``(1 - f_i)^2 c_i^2`` with
     ``1 - f_i = lambda^2 / (sigma_i^2 + lambda^2)``: increasing in ``lambda``, solved for by bisection on its
     logarithm."""
-    outside = _outside(total, utb)
+    sigma, vt, utb = spectrum.sigma, spectrum.vt, spectrum.utb
+    outside = _outside(spectrum.total, utb)
     if outside + float(np.sum(utb[rank:] ** 2)) >= target:
         return 0.0, None
     x0 = prior().reshape(vt.shape[1], -1)
-    c = utb - sigma[:, None] * (vt @ x0)                                        # (m, k)
+    c = utb - sigma[:, None] * (vt @ x0)                                        # (p, k)
     fixed = outside + float(np.sum(c[rank:] ** 2))
     power = np.sum(c[:rank] ** 2, axis=1)                                       # (rank,)
     kept = sigma[:rank]
