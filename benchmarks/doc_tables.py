@@ -25,6 +25,10 @@ import re
 import sys
 from pathlib import Path
 
+if str(Path(__file__).resolve().parent) not in sys.path:      # doc_blocks, beside this one
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+import doc_blocks  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_parts"
 #: The pages that hold the tables.
@@ -41,9 +45,8 @@ TABLES = {
     "g1": None,                       # g1_table(): four parts and fields, with and without G1
 }
 
-#: A table's place: its markers, indented as the text around them (a table inside a list item), and between them
-#: the table, indented the same.
-_BLOCK = re.compile(r"^(( *)<!-- doc_tables: (\w+) -->\n)(.*?)(^\2<!-- /doc_tables -->)", re.S | re.M)
+# A table's place is a block of ``doc_blocks.py`` (its markers, indented as the text around them, a table inside a
+# list item, and between them the table, indented the same).
 
 
 #: Distances [mm] and angles [°] below these are round-off, not results: the tables say "< 1e-09" for them.
@@ -163,15 +166,6 @@ def g1_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-def _shown(page: Path) -> str:
-    """``page`` as a path from the repository when it lies in it, else as it is."""
-    return str(page.relative_to(ROOT)) if page.is_relative_to(ROOT) else str(page)
-
-
-def _indented(text: str, indent: str) -> str:
-    return "".join(indent + line if line.strip() else line for line in text.splitlines(keepends=True))
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="compare, do not write; exit 1 on a difference")
@@ -182,22 +176,21 @@ def main(argv=None) -> int:
     if unknown:
         parser.error(f"unknown table(s) {', '.join(unknown)}: choose from {', '.join(TABLES)}")
     texts = {page: page.read_text(encoding="utf-8") for page in PAGES}
-    blocks = {m.group(3): (page, m) for page, text in texts.items() for m in _BLOCK.finditer(text)}
+    blocks = {b.name: (page, b) for page, text in texts.items() for b in doc_blocks.blocks(text)}
     missing = [n for n in names if n not in blocks]
     if missing:
-        print(f"no page of the docs has a block for {', '.join(missing)} (<!-- doc_tables: NAME -->)",
-              file=sys.stderr)
+        print(f"no page of the docs has a block for {', '.join(missing)} ({doc_blocks.OPEN})", file=sys.stderr)
         return 2
-    made = {n: _indented(g1_table() if n == "g1" else table(n), blocks[n][1].group(2)) for n in names}
-    found = {n: differences(blocks[n][1].group(4), made[n]) for n in names}
+    made = {n: g1_table() if n == "g1" else table(n) for n in names}
+    found = {n: differences(blocks[n][1].body, doc_blocks.indented(made[n], blocks[n][1].indent)) for n in names}
     differ = [n for n in names if found[n]]
     if args.check:
         for n in differ:
-            print(f"{_shown(blocks[n][0])}: table {n} differs from what the tool prints now:\n  "
+            print(f"{doc_blocks.shown(blocks[n][0])}: table {n} differs from what the tool prints now:\n  "
                   + "\n  ".join(found[n]), file=sys.stderr)
         return 1 if differ else 0
     for page, text in texts.items():
-        new = _BLOCK.sub(lambda m: m.group(1) + made.get(m.group(3), m.group(4)) + m.group(5), text)
+        new = doc_blocks.replace_all(text, {n: made[n] for n in doc_blocks.names(text) if n in made})
         if new != text:
             page.write_text(new, encoding="utf-8")
     print(f"{', '.join(differ) or 'no table'} rewritten")

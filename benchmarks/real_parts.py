@@ -34,6 +34,13 @@ the others, and its peak memory is its own):
 A run past ``--timeout`` is killed and recorded as such; a child that dies (signal, memory limit
 ``--max-memory``) is recorded with what it wrote to stderr.  Everything is seeded: the same options give the
 same node sets and fields.
+
+``--doc PAGE`` (after a run, or with ``--show``) writes the tables it prints into the page's blocks of their
+names (:data:`DOC_PAGES`, ``benchmarks/doc_blocks.py``): the scoreboard into ``real_parts_scoreboard``, the
+stage table into ``real_parts_stages``::
+
+    python benchmarks/real_parts.py --json runs.json
+    python benchmarks/real_parts.py --show runs.json --doc docs/benchmarks/real_parts.md
 """
 from __future__ import annotations
 
@@ -55,7 +62,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))     # the corpus module beside this one
+sys.path.insert(0, str(Path(__file__).resolve().parent))     # the corpus and doc_blocks modules beside this one
+import doc_blocks  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT / "corpus" / "real_parts"
@@ -577,6 +585,25 @@ def stage_table(runs: list[Run]) -> str:
     return "\n".join(lines)
 
 
+#: The blocks of the docs that ``--doc`` writes (:func:`doc_tables`), each with the page it is meant for.
+DOC_PAGES = {"real_parts_scoreboard": ROOT / "docs" / "benchmarks" / "real_parts.md",
+             "real_parts_stages": ROOT / "docs" / "benchmarks" / "real_parts.md"}
+
+
+def doc_tables(runs: list[Run]) -> dict[str, str]:
+    """The tables this script prints for ``runs``, by the name of their block in the docs: the scoreboard
+    (:func:`scoreboard`, with the counts by kind and the summary) and :func:`stage_table`."""
+    return {"real_parts_scoreboard": scoreboard(runs), "real_parts_stages": stage_table(runs)}
+
+
+def show(runs: list[Run], pages=None) -> int:
+    """Print the tables of ``runs``; with ``pages`` (``--doc``), write them into those pages' blocks too
+    (:func:`doc_blocks.doc_main`).  Returns the exit code."""
+    tables = doc_tables(runs)
+    print("\n\n".join(tables.values()))
+    return doc_blocks.doc_main(pages, tables) if pages else 0
+
+
 def select(paths: list[Path], names: str | None) -> list[Path]:
     """The parts whose file name contains one of the comma-separated ``names`` (case-insensitive)."""
     if not names:
@@ -608,6 +635,8 @@ def main(argv=None) -> int:
     parser.add_argument("--fields", default=",".join(FIELDS), help=f"comma-separated, of {FIELDS}")
     parser.add_argument("--nodes", default=",".join(NODES), help=f"comma-separated node sets, of {NODES}")
     run_arguments(parser, 600.0)
+    doc_blocks.add_doc_argument(parser, "the scoreboard and the stage table (blocks real_parts_scoreboard, "
+                                        "real_parts_stages)")
     args = parser.parse_args(argv)
     morph_args = tuple(args.morph_args.split())
     fields = [f for f in args.fields.split(",") if f]
@@ -620,11 +649,7 @@ def main(argv=None) -> int:
             parser.error(f"unknown node set {n!r}: one of {NODES}")
 
     if args.show:
-        runs = [load(r) for path in args.show for r in json.loads(path.read_text())]
-        print(scoreboard(runs))
-        print()
-        print(stage_table(runs))
-        return 0
+        return show([load(r) for path in args.show for r in json.loads(path.read_text())], args.doc)
     if args.one is not None:
         run = run_here(Path(args.one), kinds[0], fields[0], args.workdir, morph_args)
         args.json.write_text(json.dumps(asdict(run)))
@@ -633,6 +658,8 @@ def main(argv=None) -> int:
     paths = select(parts(quick=args.quick), args.parts)
     if not paths:
         parser.error(f"no part matches {args.parts!r}")
+    if args.doc and doc_blocks.doc_main(args.doc, table_names=DOC_PAGES):      # a missing block: say so now
+        return 2
     runs = []
     for path in paths:
         for kind in kinds:
@@ -644,10 +671,7 @@ def main(argv=None) -> int:
                 if args.json:
                     args.json.write_text(json.dumps([asdict(r) for r in runs], indent=1))
     print()
-    print(scoreboard(runs))
-    print()
-    print(stage_table(runs))
-    return 0
+    return show(runs, args.doc)
 
 
 if __name__ == "__main__":

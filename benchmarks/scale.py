@@ -46,7 +46,15 @@ The targets of issue 36 are printed against what was reached: end to end (the mo
 write) >= 15x the direct approach at 10 k nodes and >= 60x at 100 k, with the classification identical to it;
 at 1 M nodes < 15 s end to end and the classification <= 10 us a node; peak memory <= 1 GB at 100 k; Δmax at
 the largest size no larger than at the smallest (and so against the exact geometry); no stage but the fit above
-a third of the total.  ``--json FILE`` saves the rows; ``--show FILE`` prints the tables and targets of saved rows.
+a third of the total.  ``--json FILE`` saves the rows; ``--show FILE`` prints the tables and targets of saved rows
+(of the blades of ``--blades``).
+
+``--doc PAGE`` (after a run, or with ``--show``) writes each blade's table into the page's block
+``scale_<blade>`` (:data:`DOC_PAGES`, ``benchmarks/doc_blocks.py``); a blade whose block the page lacks is an
+error::
+
+    python benchmarks/scale.py 10000 100000 1000000 --blades thin_blade --json rows.json
+    python benchmarks/scale.py --show rows.json --doc docs/benchmarks/speed.md
 """
 from __future__ import annotations
 
@@ -62,6 +70,10 @@ from pathlib import Path
 
 import numpy as np
 
+if str(Path(__file__).resolve().parent) not in sys.path:      # doc_blocks, beside this one
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+import doc_blocks  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 #: The blades measured: their STEP files.
 STEPS = {"rotor37": ROOT / "sample_parts" / "rotor37_blade.step",
@@ -70,6 +82,9 @@ STEPS = {"rotor37": ROOT / "sample_parts" / "rotor37_blade.step",
 EXACT_SPACING = 0.25
 #: FE-like node spacing (mm) that gives about the number of nodes on each blade; nodes grow as 1/spacing^2.
 REFERENCE = {"rotor37": (0.5, 36_129), "thin_blade": (0.5, 34_000)}
+#: The blocks of the docs that ``--doc`` writes (:func:`doc_tables`: ``scale_<blade>``), each with the page it is
+#: meant for; the Rotor 37 blade's table has none (its last figures are history, in ``speed_history.md``).
+DOC_PAGES = {"scale_thin_blade": ROOT / "docs" / "benchmarks" / "speed.md"}
 
 
 def reference(blade: str = "rotor37"):
@@ -236,20 +251,21 @@ def main(argv=None) -> int:
     parser.add_argument("--field", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--direct", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--json", type=Path, help="save the rows here")
-    parser.add_argument("--show", type=Path, help="print the tables of rows saved with --json, and stop")
+    parser.add_argument("--show", type=Path,
+                        help="print the tables of rows saved with --json (of the blades of --blades), and stop")
+    doc_blocks.add_doc_argument(parser, "each blade's table (block scale_<blade>)")
     args = parser.parse_args(argv)
     blades = args.blades.split(",")
-    if args.show:
-        saved = json.loads(args.show.read_text())
-        for blade in dict.fromkeys(r["blade"] for r in saved):
-            _summary(blade, [r for r in saved if r["blade"] == blade])
-        return 0
-    if args.one is not None:
-        print(json.dumps(one(args.one, args.field, args.direct, blades[0], args.threads)))
-        return 0
     for blade in blades:
         if blade not in STEPS:
             parser.error(f"unknown blade {blade!r}: one of {', '.join(STEPS)}")
+    if args.show:
+        return show([r for r in json.loads(args.show.read_text()) if r["blade"] in blades], args.doc)
+    if args.one is not None:
+        print(json.dumps(one(args.one, args.field, args.direct, blades[0], args.threads)))
+        return 0
+    if args.doc and doc_blocks.doc_main(args.doc, table_names=[f"scale_{b}" for b in blades]):
+        return 2                                # a missing block: said before the run, not after it
 
     rows = []
     for blade in blades:
@@ -268,9 +284,25 @@ def main(argv=None) -> int:
             print("  " + json.dumps(row), flush=True)
             if args.json:
                 args.json.write_text(json.dumps(rows, indent=1))
-    for blade in blades:
+    return show(rows, args.doc)
+
+
+def doc_tables(rows: list[dict]) -> dict[str, str]:
+    """The tables this script prints for ``rows``, by the name of their block in the docs: per blade (in the
+    order of the rows) ``scale_<blade>``, its :func:`table`."""
+    return {f"scale_{blade}": table(blade, [r for r in rows if r["blade"] == blade])
+            for blade in dict.fromkeys(r["blade"] for r in rows)}
+
+
+def show(rows: list[dict], pages=None) -> int:
+    """Print the table and targets of each blade of ``rows``; with ``pages`` (``--doc``), write the tables into
+    those pages' blocks too (:func:`doc_blocks.doc_main`).  Returns the exit code."""
+    for blade in dict.fromkeys(r["blade"] for r in rows):
         _summary(blade, [r for r in rows if r["blade"] == blade])
-    return 0
+    if not pages:
+        return 0
+    print()
+    return doc_blocks.doc_main(pages, doc_tables(rows))
 
 
 def _identical(c: dict) -> bool:
