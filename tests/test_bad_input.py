@@ -685,7 +685,7 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.tessellate import tessellate
     from hot2cold.pipeline.artificial import ElementField, FieldEstimator
-    from hot2cold.pipeline.checks import FaceGridder, FaceNodes
+    from hot2cold.pipeline.grids import FaceGridder, FaceNodes
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -705,14 +705,14 @@ def test_face_grids_take_a_field_with_elements_from_its_elements(box):
 
 @pytest.mark.heavy
 def test_face_grids_from_kept_face_nodes_are_the_same(box):
-    """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.checks.FaceNodes`, as the
+    """The faces' nodes and estimates kept across calls (:class:`~hot2cold.pipeline.grids.FaceNodes`, as the
     refinement keeps them) give the grids found anew, point for point, and so do grids made without their
-    slack and given it later (:func:`~hot2cold.pipeline.checks.with_slack`).  (The gridder takes the
+    slack and given it later (:func:`~hot2cold.pipeline.grids.with_slack`).  (The gridder takes the
     classification and the field from its kept nodes, so none can be kept for another field.)"""
     from hot2cold import morph
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, with_slack
+    from hot2cold.pipeline.grids import FaceGridder, FaceNodes, with_slack
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))
@@ -760,7 +760,8 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     from hot2cold.kernel.project import Projector
     from hot2cold.kernel.validity import check_solids
     from hot2cold.pipeline.artificial import FieldEstimator
-    from hot2cold.pipeline.checks import FaceGridder, FaceNodes, FieldScale, Rebuilt, check_cold
+    from hot2cold.pipeline.checks import FieldScale, Rebuilt, check_cold
+    from hot2cold.pipeline.grids import FaceGridder, FaceNodes
 
     nodes = box[1]
     result = morph(str(box[0]), (nodes, FIELD(nodes)))

@@ -138,7 +138,7 @@ def test_bend_parameters_blockwise_as_at_once(monkeypatch, rational):
 def test_a_grid_point_is_vouched_for_only_where_the_nodes_tell_it_is_within_the_limit():
     """Near the nodes the error is at most ``off`` plus the larger of the slack and the uncertainty: a point
     is vouched for where that is within the limit; out of the nodes' reach it is not at all."""
-    from hot2cold.pipeline.checks import FaceGrid
+    from hot2cold.pipeline.grids import FaceGrid
 
     n = 5
     grid = FaceGrid(np.zeros((n, 2)), np.zeros((n, 3)), np.zeros((n, 3)),
@@ -150,7 +150,7 @@ def test_a_grid_point_is_vouched_for_only_where_the_nodes_tell_it_is_within_the_
     # within; may be beyond (uncertain estimate); beyond; may be beyond (the estimate misses its nodes); far
     assert grid.unmeasured(off, 1e-3).tolist() == [False, True, True, True, True]
     # and within the limit by less than the grid can resolve between its points
-    from hot2cold.pipeline.checks import VOUCH_SHARE
+    from hot2cold.pipeline.grids import VOUCH_SHARE
 
     near_limit = np.array([(VOUCH_SHARE + 0.01) * 1e-3 - 1e-4, 0.0, 0.0, 0.0, 0.0])
     assert grid.unmeasured(near_limit, 1e-3)[0]

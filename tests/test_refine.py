@@ -516,7 +516,7 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
 
     from hot2cold.core.model import Role
     from hot2cold.kernel.project import Projector
-    from hot2cold.pipeline.checks import FaceGrid
+    from hot2cold.pipeline.grids import FaceGrid
     from hot2cold.pipeline.context import MorphContext
 
     shape, nodes = blade_1mm

@@ -22,7 +22,7 @@ from scipy import sparse
 from ..core.bspline import BSplineSurface
 from ..core.model import Part, Role
 from ..settings import Continuity
-from .checks import FaceGrid
+from .grids import FaceGrid
 from .context import MorphContext
 from .distance import Allowance
 from .edge_fit import EdgeMorph

@@ -17,7 +17,7 @@ from ..core.footpoint import surface_distances_above
 from ..core.model import Classification, Part, Role
 from ..core.threads import map_threads
 from ..io.field import DisplacementField
-from .checks import FaceGrid
+from .grids import FaceGrid
 from .edge_fit import EdgeMorph
 from .refine import edge_errors
 

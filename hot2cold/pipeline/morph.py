@@ -34,14 +34,14 @@ from ..kernel.tolerances import fit_tolerances
 from ..kernel.validity import check_solids
 from ..settings import Settings
 from .artificial import GAP_SHARE, ElementField, carry_to_feet
-from .checks import (FaceGrid, FaceGridder, FaceNodes, FieldScale, Rebuilt, check_cold, check_coverage, check_hot,
-                     check_positions, edge_grids, with_slack)
+from .checks import FieldScale, Rebuilt, check_cold, check_coverage, check_hot, check_positions
 from .classify import Starts, classify_nodes
 from .context import MorphContext
 from .continuity import G1Refinement, correct_g2, smooth_g1
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 from .g1 import CornerReport
+from .grids import FaceGrid, FaceGridder, FaceNodes, edge_grids, with_slack
 from .invert import invert_field
 from .load import element_points, load_part
 from .refine import TARGET_SHARE, Refitter, Targets, noise_allowance, refine
@@ -241,7 +241,7 @@ def _classify(part: Part, field: DisplacementField, settings: Settings, inverted
 
 
 def _gridder(context: MorphContext, classified: _Classified) -> FaceGridder:
-    """The grids of a morph's faces (:class:`~hot2cold.pipeline.checks.FaceGridder`), for the refinement, G1
+    """The grids of a morph's faces (:class:`~hot2cold.pipeline.grids.FaceGridder`), for the refinement, G1
     and the checks: the faces' nodes and estimates kept across the rounds, and the FE model's own field between
     its nodes where it brings its elements and they were taken."""
     fe, cls, settings = classified.fe_field, classified.classification, context.settings

@@ -58,7 +58,7 @@ from ..core.footpoint import curve_distances, surface_distances, surface_distanc
 from ..core.model import Classification, Edge, Face, Part, Role, side_along
 from ..core.threads import map_threads
 from ..io.field import DisplacementField
-from .checks import EdgeGrid, FaceGrid
+from .grids import EdgeGrid, FaceGrid
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 
@@ -174,7 +174,7 @@ class Targets:
     face_spacing : (n_faces,) float array, the node spacing on and around each face (its own nodes and its
         edges'); ``min_span_spacings`` of it is the shortest half span a refinement makes.
     edge_spacing : (n_edges,) float array, the same for each edge.
-    grids : list of :class:`~hot2cold.pipeline.checks.FaceGrid`, per face whose own nodes do not determine
+    grids : list of :class:`~hot2cold.pipeline.grids.FaceGrid`, per face whose own nodes do not determine
         it (``between``; a face with nodes only on its edges has none) the grid points near its nodes
         (``FaceGrid.near``), with the field's local estimate there, less the estimate's own miss at the
         nearest nodes (its ``slack``): the error between the nodes as far as the nodes tell.  Other faces are
@@ -185,7 +185,7 @@ class Targets:
     between : (n_faces,) bool array, the faces measured on their grids: those whose nodes do not determine
         them with their hot knots (:func:`nodes_determine`), decided once, so that a face refined into more
         patches than its nodes fill is not measured against the estimate for that alone.
-    edge_grids : list of :class:`~hot2cold.pipeline.checks.EdgeGrid`, per edge the points along it near the
+    edge_grids : list of :class:`~hot2cold.pipeline.grids.EdgeGrid`, per edge the points along it near the
         nodes around it where its own nodes do not outnumber its poles twice, with the field's estimate there.
     min_span_spacings : float, :data:`MIN_SPAN_SPACINGS`, or :data:`MIN_SPAN_SPACINGS_ELEMENTS` for a field
         sampled inside its elements.
@@ -206,7 +206,7 @@ class Targets:
         face and its edges, or of an edge; of all nodes where there are none) and the grid points of
         ``grids`` (face index -> its grid; at least the :meth:`measured_faces`) near the nodes of faces their
         own nodes do not determine, and ``edge_grids`` (one per edge,
-        :func:`~hot2cold.pipeline.checks.edge_grids`); ``inside_elements``: the field is sampled inside its FE
+        :func:`~hot2cold.pipeline.grids.edge_grids`); ``inside_elements``: the field is sampled inside its FE
         elements (its spans may be shorter, :data:`MIN_SPAN_SPACINGS_ELEMENTS`)."""
         overall = classification.spacing()
 
@@ -525,7 +525,7 @@ class Refitter:
     morphs; ``fit_edges(part, edge_morphs, refined) -> edge_morphs`` fits the edges in the set ``refined``
     again and returns every edge's morph (it may touch others, e.g. at corners of tangent edges: an edge whose
     curve object changes counts as changed); ``regrid(part, faces) -> grids`` gives the :class:`FaceGrid` of
-    each of the (refined) ``faces`` of ``part`` (:class:`~hot2cold.pipeline.checks.FaceGridder`); the faces of a
+    each of the (refined) ``faces`` of ``part`` (:class:`~hot2cold.pipeline.grids.FaceGridder`); the faces of a
     round are fitted in up to ``threads`` threads; :func:`refine` runs ``max_rounds`` rounds at the most.
     """
 

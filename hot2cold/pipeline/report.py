@@ -23,7 +23,7 @@ from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
 from ..core.threads import map_threads
 from ..settings import Settings
-from .checks import GRID_REACH
+from .grids import GRID_REACH
 
 
 class Morphed(Protocol):
