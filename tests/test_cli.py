@@ -186,6 +186,27 @@ def test_help_lists_extrapolate_and_both_commands(capsys):
     assert "JOBS" in capsys.readouterr().out
 
 
+def test_help_lists_every_field_format_and_groups_the_options(capsys):
+    """``hot2cold morph --help`` names every field format the tool reads and lists the options in groups: the
+    outputs, the field's, accuracy and checks, viewer exports, messages (each option in exactly one)."""
+    with pytest.raises(SystemExit):
+        main(["morph", "--help"])
+    out = capsys.readouterr().out
+    field_help = " ".join(out.split("positional arguments:")[1].split("options:")[0].split())
+    for ext in (".csv", ".txt", ".npz", ".frd", ".rst", ".op2", ".pch", ".vtu", ".msh"):
+        assert ext in field_help, ext
+    titles = ["outputs:", "the field: which data of the file, in what unit:", "accuracy and checks:",
+              "viewer exports (written after the cold STEP):", "messages:"]
+    at = [out.index(f"\n{t}\n") for t in titles]
+    assert at == sorted(at)
+    sections = dict(zip(titles, (out[a:b] for a, b in zip(at, at[1:] + [len(out)]))))
+    assert "--report" in sections["outputs:"] and "--field-points" in sections[titles[1]]
+    assert "--tolerance" in sections["accuracy and checks:"] and "--html" in sections[titles[3]]
+    assert "--quiet" in sections["messages:"]
+    for flag in (o.flag for o in MorphOptions.table().values()):
+        assert sum(f"  {flag}" in text for text in sections.values()) == 1, flag
+
+
 GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guide"
 
 

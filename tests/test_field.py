@@ -387,10 +387,17 @@ def test_missing_columns(tmp_path):
     ("Node Number\tX Location (mm)\tY Location (mm)\tZ Location (mm)\tDirectional Deformation X (mm)\t"
      "Directional Deformation Y (mm)\tDirectional Deformation Z (mm)", True),   # ANSYS Mechanical
     ("nid;x [mm];y [mm];z [mm];disp_x;disp_y;disp_z", True),
+    # Abaqus/CAE's CSV export of a field report: a magnitude column beside the components
+    ("Node Label,COORD-COORD1,COORD-COORD2,COORD-COORD3,U-Magnitude,U-U1,U-U2,U-U3", True),
+    ("Node Label  COORD1  COORD2  COORD3  U1  U2  U3", True),       # a report's columns two spaces apart
+    ('"Node Label" x y z u1 u2 u3', True),                         # a quoted name with a space
+    ("Node Label x y z u1 u2 u3", True),                           # a known name of two words, one space apart
 ])
 def test_other_solvers_headers(tmp_path, header, ids):
     delim = "\t" if "\t" in header else ";" if ";" in header else "," if "," in header else "  "
-    rows = [delim.join(str(v) for v in ([k + 7] if ids else []) + list(P[k]) + list(D[k])) for k in range(len(P))]
+    magnitude = [[float(np.linalg.norm(D[k]))] if "Magnitude" in header else [] for k in range(len(P))]
+    rows = [delim.join(str(v) for v in ([k + 7] if ids else []) + list(P[k]) + magnitude[k] + list(D[k]))
+            for k in range(len(P))]
     f = read_field(write(tmp_path, header + "\n" + "\n".join(rows) + "\n"))
     np.testing.assert_array_equal(f.points, P)
     np.testing.assert_array_equal(f.displacements, D)
@@ -438,6 +445,22 @@ def test_magnitude_only_is_refused_with_why(tmp_path):
     msg = raises(write(tmp_path, "Node Number,X Location (mm),Y Location (mm),Z Location (mm),"
                                  "Total Deformation (mm)\n1,0,0,0,0.1\n"), r"lacks column\(s\) dx, dy, dz")
     assert "'Total Deformation (mm)' is the displacement's magnitude" in msg
+
+
+def test_magnitude_is_no_hint_where_the_positions_are_missing(tmp_path):
+    """A header with the displacement's components and its magnitude but positions under unknown names is told
+    what is missing (the positions), not to export components it has."""
+    msg = raises(write(tmp_path, "Node,PX,PY,PZ,U-Magnitude,U-U1,U-U2,U-U3\n1,0,0,0,1,1,0,0\n"),
+                 r"lacks column\(s\) x, y, z \(header found")
+    assert "the displacement's magnitude" not in msg and "export its three components" not in msg
+
+
+def test_a_name_with_a_space_is_said_where_it_splits_the_header(tmp_path):
+    """A whitespace-separated header whose name of two words hot2cold does not know counts one name too many:
+    the message says why and how to write it."""
+    msg = raises(write(tmp_path, "Node Tag x y z u1 u2 u3\n1 0 0 0 1 0 0\n2 1 0 0 1 0 0\n"),
+                 r"line 2 has 7 fields but the header has 8 \(whitespace-separated\)")
+    assert "a column name with a space in it" in msg and "quote it" in msg
 
 
 def test_no_header(tmp_path):

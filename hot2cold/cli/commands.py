@@ -32,6 +32,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import Hot2ColdError, InputError, OutputError, StepReadError
+from ..io.field import FIELD_FORMATS
 from ..io.inputs import check_input_file
 from .options import MorphOptions
 
@@ -46,10 +47,11 @@ def _parser() -> argparse.ArgumentParser:
     m = sub.add_parser("morph", help="morph a hot STEP solid into a cold one",
                        description="Morph HOT (STEP) with the displacement field FIELD into the cold part.")
     m.add_argument("hot", type=Path, help="hot part, STEP file with one or more solids")
-    m.add_argument("field", type=Path, help="FE field: CSV/TXT with columns x,y,z,dx,dy,dz (hot positions, "
-                   "hot-to-cold displacements), or .npz with arrays points and displacements")
-    m.add_argument("-o", "--output", type=Path, required=True, help="cold part, STEP file to write")
-    m.add_argument("--report", type=Path, help="write the accuracy report as JSON here")
+    m.add_argument("field", type=Path, help="FE field, hot positions and hot-to-cold displacements at the nodes: "
+                   + "; ".join(FIELD_FORMATS))
+    outputs = m.add_argument_group("outputs")
+    outputs.add_argument("-o", "--output", type=Path, required=True, help="cold part, STEP file to write")
+    outputs.add_argument("--report", type=Path, help="write the accuracy report as JSON here")
     MorphOptions.add_arguments(m)
     views = m.add_argument_group("viewer exports (written after the cold STEP)")
     views.add_argument("--vtu", type=Path, metavar="NODES.vtu",
@@ -66,8 +68,9 @@ def _parser() -> argparse.ArgumentParser:
     views.add_argument("--html", type=Path, metavar="PATH", help="a self-contained HTML report with pictures")
     views.add_argument("--scale", type=float, metavar="FACTOR",
                        help="displacement magnification of the --html pictures (default: chosen by the report)")
-    m.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
-    m.add_argument("-v", "--verbose", action="store_true", help="log each step")
+    said = m.add_argument_group("messages")
+    said.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    said.add_argument("-v", "--verbose", action="store_true", help="log each step")
     b = sub.add_parser("batch", help="morph the jobs of a CSV or TOML jobs file, in parallel",
                        description="Run the morphs listed in JOBS (CSV: a header hot,field,output[,options] and a "
                        "row per job; TOML: [[jobs]] tables and an optional [defaults] table). Options as for "

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 from dataclasses import dataclass, field, fields
+from enum import Enum
 from pathlib import Path
 from typing import Callable
 
@@ -106,11 +107,19 @@ def to_count(value, folder: Path) -> int:
 # --------------------------------------------------------------------------------------------------------
 # The table
 # --------------------------------------------------------------------------------------------------------
+class OptionGroup(Enum):
+    """The groups of ``hot2cold morph --help`` the options are listed in (the value: the group's title)."""
+
+    FIELD = "the field: which data of the file, in what unit"
+    ACCURACY = "accuracy and checks"
+
+
 @dataclass(frozen=True)
 class Option:
     """How one morph option is given.
 
     flag : the ``hot2cold morph`` flag (``--`` and the field's name with ``-`` for ``_``).
+    group : the :class:`OptionGroup` ``--help`` lists it in.
     help : argparse's help text (a ``%`` written ``%%``).
     convert : a jobs-file value -> the option's value (``value, folder``; ValueError when unusable).
     type : argparse's converter of the flag's argument; None for a switch (``store_true``).
@@ -118,6 +127,7 @@ class Option:
     """
 
     flag: str
+    group: OptionGroup
     help: str
     convert: Callable
     type: Callable | None = None
@@ -125,9 +135,10 @@ class Option:
     choices: tuple[str, ...] | None = None
 
 
-def _option(default, *, flag: str, convert: Callable, help: str, **more):
+def _option(default, *, flag: str, group: OptionGroup, convert: Callable, help: str, **more):
     """A field of :class:`MorphOptions`: its default and its :class:`Option` as metadata."""
-    return field(default=default, metadata={"option": Option(flag=flag, help=help, convert=convert, **more)})
+    return field(default=default, metadata={"option": Option(flag=flag, group=group, help=help, convert=convert,
+                                                             **more)})
 
 
 @dataclass(frozen=True)
@@ -137,64 +148,64 @@ class MorphOptions:
     of the jobs-file messages and of a batch record's ``options``."""
 
     field_units: str | None = _option(
-        None, flag="--field-units", convert=to_units, type=str, choices=tuple(sorted(UNITS)),
+        None, flag="--field-units", group=OptionGroup.FIELD, convert=to_units, type=str, choices=tuple(sorted(UNITS)),
         help="length unit of the field file (default: the unit the file states, as an ANSYS .rst or a column "
         "'X Location (m)' does, else mm)")
     field_name: str | None = _option(
-        None, flag="--field-name", convert=to_text, type=str, metavar="NAME",
+        None, flag="--field-name", group=OptionGroup.FIELD, convert=to_text, type=str, metavar="NAME",
         help="which displacements to take: the point field of a VTK/VTU file (default: U, displacement or DISP), "
         "the dataset of an .frd (DISP), the result set of an ANSYS .rst (LS,SUB) or the subcase of a Nastran "
         ".op2/.pch (its id); default the last")
     field_step: int | None = _option(
-        None, flag="--field-step", convert=to_count, type=int, metavar="N",
+        None, flag="--field-step", group=OptionGroup.FIELD, convert=to_count, type=int, metavar="N",
         help="which result set of a solver results file (.frd, .rst, .op2, .pch), counting from 0 in file "
         "order, negative from the end (default: the last)")
     columns: str | None = _option(
-        None, flag="--columns", convert=to_text, type=str, metavar="MAP",
+        None, flag="--columns", group=OptionGroup.FIELD, convert=to_text, type=str, metavar="MAP",
         help="which columns of a text field hold what, e.g. 'x=X Location,y=Y Location,z=Z Location,dx=UX,"
         "dy=UY,dz=UZ' (keys x y z dx dy dz id; names as in the header, any case); the others are found by their "
         "usual names")
     field_points: Path | None = _option(
-        None, flag="--field-points", convert=to_path, type=Path, metavar="FILE",
+        None, flag="--field-points", group=OptionGroup.FIELD, convert=to_path, type=Path, metavar="FILE",
         help="where the node positions of a results file without them come from (.pch; .op2 without geometry; "
         ".frd for full precision): the Nastran model (.bdf, .dat, .nas: its GRID cards) or a field file with "
         "node ids, matched by node number")
     invert: bool = _option(
-        False, flag="--invert", convert=to_flag,
+        False, flag="--invert", group=OptionGroup.FIELD, convert=to_flag,
         help="the field goes cold to hot (at the hot mesh's nodes): invert it by fixed-point iteration")
     tolerance: float | None = _option(
-        None, flag="--tolerance", convert=to_number, type=float, metavar="MM",
+        None, flag="--tolerance", group=OptionGroup.ACCURACY, convert=to_number, type=float, metavar="MM",
         help="largest accepted error, at the nodes and between them (default 0.001, the paper's aerofoil "
         "accuracy; widened by the field's own scatter): where it is missed, faces and edges are refined (knot "
         "insertion, degree raised to cubic; the hot shape is kept) and fitted again; exit code 5 when it "
         "still is not met")
     keep_knots: bool = _option(
-        False, flag="--keep-knots", convert=to_flag,
+        False, flag="--keep-knots", group=OptionGroup.ACCURACY, convert=to_flag,
         help="keep every degree and knot vector of the hot part (the paper's strict mode): nothing is refined; "
         "the tolerance is still checked (exit code 5 when it is not met)")
     max_refinements: int | None = _option(
-        None, flag="--max-refinements", convert=to_count, type=int, metavar="N",
+        None, flag="--max-refinements", group=OptionGroup.ACCURACY, convert=to_count, type=int, metavar="N",
         help=f"rounds of refinement to the tolerance at the most (default {Settings.max_refinements})")
     node_distance: float | None = _option(
-        None, flag="--node-distance", convert=to_number, type=float, metavar="MM",
+        None, flag="--node-distance", group=OptionGroup.ACCURACY, convert=to_number, type=float, metavar="MM",
         help="nodes farther than this from every face are ignored (default 0.1%% of the part size)")
     edge_distance: float | None = _option(
-        None, flag="--edge-distance", convert=to_number, type=float, metavar="MM",
+        None, flag="--edge-distance", group=OptionGroup.ACCURACY, convert=to_number, type=float, metavar="MM",
         help="nodes this close to an edge feed the edge (default 0.01%% of the part size)")
     extrapolate: bool = _option(
-        False, flag="--extrapolate", convert=to_flag,
+        False, flag="--extrapolate", group=OptionGroup.ACCURACY, convert=to_flag,
         help="morph faces that get no FE node from the field of the other faces, extrapolated (with a "
         "warning); without it such a field is refused")
     nodes_only: bool = _option(
-        False, flag="--nodes-only", convert=to_flag,
+        False, flag="--nodes-only", group=OptionGroup.ACCURACY, convert=to_flag,
         help="use the field's nodes alone, not the FE elements it brings (.frd, VTU cells, an .npz with "
         "triangles): by default the field is also taken inside the boundary elements by their shape functions")
     continuity: str = _option(
-        "g1", flag="--continuity", convert=to_continuity, type=str, choices=CONTINUITIES,
+        "g1", flag="--continuity", group=OptionGroup.ACCURACY, convert=to_continuity, type=str, choices=CONTINUITIES,
         help="g1 (default): the tangent planes restored along edges where the hot faces met tangentially; g2: "
         "also their curvature across edges where it was continuous when hot (jump within 1%% of the curvature)")
     max_displacement_rel: float | None = _option(
-        None, flag="--max-displacement-rel", convert=to_share, type=float, metavar="SHARE",
+        None, flag="--max-displacement-rel", group=OptionGroup.ACCURACY, convert=to_share, type=float, metavar="SHARE",
         help="largest node displacement accepted, as a share of the part's diagonal (default 0.1): a field "
         "that moves the part farther is refused as no hot-to-cold field (cold positions given as "
         "displacements, another part's field)")
@@ -211,14 +222,16 @@ class MorphOptions:
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
-        """Add the options' flags to ``parser`` (the ``hot2cold morph`` parser), in the table's order."""
+        """Add the options' flags to ``parser`` (the ``hot2cold morph`` parser), in the table's order, each in
+        the argument group of its :class:`OptionGroup`."""
+        groups = {g: parser.add_argument_group(g.value) for g in OptionGroup}
         for f in fields(MorphOptions):
             opt: Option = f.metadata["option"]
             if opt.type is None:
-                parser.add_argument(opt.flag, action="store_true", help=opt.help)
+                groups[opt.group].add_argument(opt.flag, action="store_true", help=opt.help)
             else:
-                parser.add_argument(opt.flag, type=opt.type, default=f.default, metavar=opt.metavar,
-                                    choices=opt.choices, help=opt.help)
+                groups[opt.group].add_argument(opt.flag, type=opt.type, default=f.default, metavar=opt.metavar,
+                                               choices=opt.choices, help=opt.help)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> MorphOptions:

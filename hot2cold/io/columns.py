@@ -1,11 +1,11 @@
 """Which columns of a text table hold the node positions, the displacements and the node ids.
 
 Solvers and post-processors name them in their own words: ``x, y, z, dx, dy, dz`` (hot2cold's own), ``ux,
-uy, uz``, Abaqus reports' ``COORD1..3`` and ``U1..3`` (or ``U.U1``), ParaView's ``Points:0..2`` and
-``U:0..2``, ANSYS Mechanical's ``X Location (mm)`` and ``Directional Deformation X (mm)``.  :func:`assign`
-finds the six columns among a header's names by the table :data:`ALIASES`; a user's mapping
-(``--columns x=X Location,dx=UX``, :func:`parse_mapping`) names the ones the table does not know or picks
-between two it does.
+uy, uz``, Abaqus reports' ``COORD1..3`` and ``U1..3`` (or ``U.U1``; Abaqus/CAE's CSV ``COORD-COORD1`` and
+``U-U1``), ParaView's ``Points:0..2`` and ``U:0..2``, ANSYS Mechanical's ``X Location (mm)`` and
+``Directional Deformation X (mm)``.  :func:`assign` finds the six columns among a header's names by the table
+:data:`ALIASES`; a user's mapping (``--columns x=X Location,dx=UX``, :func:`parse_mapping`) names the ones the
+table does not know or picks between two it does.
 
 A unit written after a name, ``(mm)`` or ``[m]``, is the length unit the file states for that column
 (:data:`STATED_UNITS`); the caller scales by it.
@@ -41,8 +41,8 @@ def _aliases() -> dict[str, tuple[str, ...]]:
     for i, a in enumerate("xyz"):
         n = i + 1
         table[a] = (a, f"{a}_location", f"location_{a}", f"{a}_coordinate", f"coordinate_{a}", f"{a}_coord",
-                    f"coord_{a}", f"coord{n}", f"coor{n}", f"coord_coor{n}", f"points_{i}", f"point_{i}",
-                    f"node_{a}", f"{a}_node", f"hot_{a}", f"{a}0")
+                    f"coord_{a}", f"coord{n}", f"coor{n}", f"coord_coor{n}", f"coord_coord{n}", f"points_{i}",
+                    f"point_{i}", f"node_{a}", f"{a}_node", f"hot_{a}", f"{a}0")
         table[f"d{a}"] = (f"d{a}", f"d_{a}", f"u{a}", f"u_{a}", f"u{n}", f"u_u{n}", f"u_{i}", f"disp_{a}",
                           f"disp{a}", f"displacement_{a}", f"{a}_displacement", f"deformation_{a}",
                           f"{a}_deformation", f"directional_deformation_{a}", f"displacement_{i}", f"disp_{i}",
@@ -155,7 +155,7 @@ def assign(shown: list[str], path: str, mapping: Mapping[str, str] | None = None
     if missing:
         found_text = ", ".join(map(repr, shown)) + (f", {layout}" if layout else "")
         raise FieldError(f"field file {path} lacks column(s) {', '.join(missing)} (header found: {found_text})"
-                         f"{_magnitude_hint(names, shown)}; {HINT}")
+                         f"{_magnitude_hint(names, shown, missing)}; {HINT}")
     cols = tuple(found[c] for c in REQUIRED_COLUMNS)
     return Columns(cols, found.get(ID_KEY), _group_unit(parsed, shown, cols[:3], "positions", path),
                    _group_unit(parsed, shown, cols[3:], "displacements", path))
@@ -166,9 +166,11 @@ HINT = ("the header must name the columns " + ",".join(REQUIRED_COLUMNS) + " (an
         "U1,U2,U3, 'X Location (mm)' and the like also do), or map them with --columns x=NAME,...,dz=NAME")
 
 
-def _magnitude_hint(names: list[str], shown: list[str]) -> str:
+def _magnitude_hint(names: list[str], shown: list[str], missing: list[str]) -> str:
+    """Where displacement components are ``missing`` and the header has a magnitude column: that it cannot
+    stand for them."""
     total = next((shown[i] for i, n in enumerate(names) if n in MAGNITUDE_NAMES), None)
-    if total is None:
+    if total is None or not set(missing) & {"dx", "dy", "dz"}:
         return ""
     return (f"; {total!r} is the displacement's magnitude, which cannot move a point: export its three "
             f"components (Directional Deformation X, Y and Z, or U1, U2, U3)")

@@ -74,10 +74,11 @@ from ..errors import FieldError, one_line
 from .cells import ELEMENT_NAMES as _ELEMENT_NAMES
 from .cells import element_triangles
 
-from .columns import HINT, ID_COLUMNS, REQUIRED_COLUMNS, STATED_UNITS, assign, normalise, parse_mapping
+from .columns import ALIASES, HINT, ID_COLUMNS, REQUIRED_COLUMNS, STATED_UNITS, assign, normalise, parse_mapping
 from .inputs import read_input_bytes
 
-__all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "read_field",
+__all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "FIELD_FORMATS",
+           "read_field",
            "as_field", "match_points", "merge_duplicates", "DUPLICATE_RTOL",
            "DUPLICATE_DISPLACEMENT_RTOL"]
 
@@ -505,6 +506,18 @@ _MESHIO_EXTENSIONS = (".vtu", ".vtk", ".vtp", ".xdmf", ".xmf", ".msh", ".med", "
                       ".mdpa", ".ply", ".obj", ".off", ".tec", ".vol", ".xml", ".f3grid", ".hmf", ".post",
                       ".dato")
 
+#: The field file formats read, one entry each (for the command line's help and the docs; the module docstring
+#: has the details).
+FIELD_FORMATS = (
+    "a text table (.csv, .txt, .dat: comma, semicolon, tab or whitespace separated) with columns x,y,z,dx,dy,dz "
+    "or the solvers' names for them (U1, COORD1, 'X Location (mm)', Points:0, ...)",
+    "NumPy .npz with arrays points and displacements",
+    "CalculiX .frd",
+    "ANSYS .rst",
+    "Nastran .op2 and .pch (a .pch with the positions of its .bdf)",
+    "a mesh file meshio reads (.vtu, .vtk, .xdmf, .msh, .med, ...) with a point field U or displacement",
+)
+
 #: Point-field names taken as displacements in mesh files (case-insensitive, in this order of preference).
 DISPLACEMENT_NAMES = ("u", "displacement", "displacements", "disp")
 
@@ -794,9 +807,48 @@ def _short(text: str, n: int = 60) -> str:
     return text if len(text) <= n else text[: n - 3] + "..."
 
 
-def _names(header: str, delim: str | None) -> list[str]:
-    """Normalised column names (:func:`hot2cold.io.columns.normalise`)."""
-    return [normalise(n)[0] for n in _split(header, delim)]
+#: A whitespace-separated header's names: a quoted name may hold spaces (``"Node Label"``).
+_WORDS = re.compile(r"\"[^\"]*\"|'[^']*'|\S+")
+
+
+def _header_names(content: str, delim: str | None, first_data: str | None) -> list[str]:
+    """The column names of the header line ``content`` as written, separated by ``delim``.  Separated by
+    whitespace, a name may be quoted (``"Node Label"``); where the names are more than the fields of the first
+    data line ``first_data`` (a name with a space in it, ``Node Label``), runs of two or more spaces or a tab
+    separate them when that gives as many (solvers' reports align their columns so)."""
+    if delim is not None:
+        return _split(content, delim)
+    plain = [f.strip(_QUOTES) for f in _WORDS.findall(content)]
+    fields = None if first_data is None else len(first_data.split())
+    if fields is None or len(plain) <= fields:
+        return plain
+    wide = [f.strip(_QUOTES) for f in re.split(r"\s{2,}|\t", content.strip()) if f]
+    if 1 < len(wide) == fields:
+        return wide
+    return _joined(plain, len(plain) - fields)
+
+
+def _joined(names: list[str], extra: int) -> list[str]:
+    """``names`` with up to ``extra`` pairs of neighbours joined by a space where together they are a column name
+    hot2cold knows (``Node`` ``Label`` -> ``Node Label``, :data:`~hot2cold.io.columns.ALIASES`, ``ID_COLUMNS``)."""
+    known = {*ID_COLUMNS, *(name for names_ in ALIASES.values() for name in names_)}
+    out: list[str] = []
+    for name in names:
+        if extra and out and normalise(f"{out[-1]} {name}")[0] in known and normalise(name)[0] not in known:
+            out[-1] = f"{out[-1]} {name}"
+            extra -= 1
+        else:
+            out.append(name)
+    return out
+
+
+def _first_data(lines: list[str], after: int) -> str | None:
+    """The first line after line ``after`` that holds anything but a comment, without its comment."""
+    for line in lines[after + 1:]:
+        content = line.partition("#")[0].strip()
+        if content:
+            return content
+    return None
 
 
 def _fits(shown: list[str], path: str, mapping) -> bool:
@@ -808,8 +860,8 @@ def _fits(shown: list[str], path: str, mapping) -> bool:
     return True
 
 
-def _find_header(lines: list[str], path: str, mapping) -> tuple[int, str, list[str], str | None]:
-    """(index of the first data line, header text, normalised column names, delimiter)."""
+def _find_header(lines: list[str], path: str, mapping) -> tuple[int, list[str], str | None]:
+    """(index of the first data line, the column names as written (:func:`_header_names`), delimiter)."""
     for h, line in enumerate(lines):
         content = line.partition("#")[0].strip()
         if content:
@@ -820,9 +872,8 @@ def _find_header(lines: list[str], path: str, mapping) -> tuple[int, str, list[s
     delim = _delimiter(content)
     if delim is None and "\t" in content and not _fits(_split(content, None), path, mapping):
         delim = "\t"          # tab-separated names with spaces in them (ANSYS Mechanical's "X Location (mm)")
-    names = _names(content, delim)
     if not all(_is_number(n) for n in _split(content, delim)):
-        return h + 1, content, names, delim
+        return h + 1, _header_names(content, delim, _first_data(lines, h)), delim
     # The first line holds numbers: a header may have been written as a comment (numpy.savetxt).
     for c in range(h - 1, -1, -1):
         text = lines[c].strip()
@@ -830,9 +881,10 @@ def _find_header(lines: list[str], path: str, mapping) -> tuple[int, str, list[s
             continue
         text = text.lstrip("#").strip()
         cdelim = _delimiter(text)
-        if not _fits(_split(text, cdelim), path, mapping):
+        shown = _header_names(text, cdelim, content)
+        if not _fits(shown, path, mapping):
             break
-        return h, text, _names(text, cdelim), cdelim
+        return h, shown, cdelim
     raise FieldError(
         f"field file {path} has no header line: line {h + 1} ({_short(content)!r}) holds numbers; "
         f"add a first line naming the columns, e.g. {','.join(REQUIRED_COLUMNS)}")
@@ -848,8 +900,8 @@ def _parse_text(raw: bytes, path: str, mapping=None) -> tuple[DisplacementField,
             f"field file {path} is empty; it needs a header line naming {','.join(REQUIRED_COLUMNS)} "
             f"and one line per FE node")
     lines = text.splitlines()
-    start, header, names, delim = _find_header(lines, path, mapping)
-    shown = _split(header, delim)  # the names as written, for messages
+    start, shown, delim = _find_header(lines, path, mapping)   # the names as written, for messages
+    names = [normalise(n)[0] for n in shown]
     found = assign(shown, path, mapping, _delim_name(delim))
     cols, id_col = list(found.cols), found.id_col
     ncols = len(names)
@@ -941,9 +993,12 @@ def _check_field_counts(data, lineno, delim, ncols, path) -> None:
     if bad.size:
         k = int(bad[0])
         more = f" ({bad.size} lines like it)" if bad.size > 1 else ""
+        split = ("; a column name with a space in it (Node Label) counts as two in a whitespace-separated "
+                 "header: quote it, or separate the names by tabs, commas or two spaces"
+                 if delim is None and bad.size == len(data) and 1 < counts[k] < ncols else "")
         raise FieldError(
             f"field file {path} line {int(lineno[k])} has {_n(int(counts[k]), 'field')} but the header has "
-            f"{ncols} ({_delim_name(delim)}){more}; give every line one value per header column")
+            f"{ncols} ({_delim_name(delim)}){more}{split}; give every line one value per header column")
 
 
 def _parse_slow(data, lineno, delim, cols, names, path) -> np.ndarray:
