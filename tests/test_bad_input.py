@@ -795,3 +795,39 @@ def test_check_cold_finds_a_bump_between_the_nodes(box):
     assert any(re.match(rf"moves face {top} by up to 1\.\d+ mm near \(.*\) mm, farther than the field moves any "
                         rf"node \(0\.\d+ mm; up to 1\.5 x that \+ 0\.\d+ mm accepted\)$", p)
                for p in bumped.problems[0]), bumped.problems[0]
+
+
+def _in_unit(step: Path, target: Path, unit: str) -> Path:
+    """``step`` (in mm) written again with its lengths declared in ``unit`` ("INCH" or "METRE"): the same
+    numbers, so the part is 25.4 or 1000 times larger once read."""
+    text = step.read_text()
+    mm = re.search(r"\( LENGTH_UNIT\(\) NAMED_UNIT\(\*\) SI_UNIT\(\.MILLI\.,\.METRE\.\) \)", text)
+    assert mm, "the STEP writer's millimetre unit"
+    if unit == "METRE":
+        declared = "( LENGTH_UNIT() NAMED_UNIT(*) SI_UNIT($,.METRE.) )"
+        target.write_text(text.replace(mm.group(0), declared))
+        return target
+    declared = "( CONVERSION_BASED_UNIT('INCH',#90001) LENGTH_UNIT() NAMED_UNIT(#90002) )"
+    extra = ("#90001 = LENGTH_MEASURE_WITH_UNIT(LENGTH_MEASURE(25.4),#90003);\n"
+             "#90002 = DIMENSIONAL_EXPONENTS(1.,0.,0.,0.,0.,0.,0.);\n"
+             "#90003 = ( LENGTH_UNIT() NAMED_UNIT(*) SI_UNIT(.MILLI.,.METRE.) );\n")
+    text = text.replace(mm.group(0), declared).replace("ENDSEC;\nEND-ISO-10303-21;",
+                                                       extra + "ENDSEC;\nEND-ISO-10303-21;")
+    target.write_text(text)
+    return target
+
+
+@pytest.mark.parametrize("unit, factor, said", [("INCH", 25.4, "inch"), ("METRE", 1000.0, "metre")])
+def test_a_step_in_another_unit_is_said_to_come_out_in_millimetres(tmp_path, box, out, capsys, unit, factor, said):
+    """A hot STEP that states its lengths in inches or metres is read in millimetres (the kernel converts) and the
+    cold part is written in millimetres: the command line says so in a warning; a millimetre STEP says nothing."""
+    step = _in_unit(box[0], tmp_path / f"box_{unit}.step", unit)
+    nodes = box[1] * factor
+    field = _write_field(tmp_path / "f.csv", nodes, FIELD(nodes))
+    code = main(_morph(step, field, out))
+    err = capsys.readouterr().err
+    assert code == 0
+    assert f"box_{unit}.step states its lengths in {said}: hot2cold reads and writes in millimetres, so the cold " \
+           f"part is in millimetres" in err
+    assert main(_morph(box[0], box[2], tmp_path / "mm.step")) == 0
+    assert "states its lengths" not in capsys.readouterr().err

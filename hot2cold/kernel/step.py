@@ -1,5 +1,8 @@
 """Reading and writing STEP files (shapes only; names and colours: :mod:`hot2cold.kernel.xcaf`).
 
+The kernel reads every file in millimetres, whatever length unit the file states, and hot2cold writes in
+millimetres: a file in another unit (inch, metre) is said to come out in millimetres (a warning).
+
 Output is written whole or not at all: to a temporary file in the target folder, then renamed.  A cold part
 is read back from that temporary file before the rename (``verify``): its solids must come back valid,
 closed and with the faces that were written, or nothing is written (:class:`~hot2cold.errors.MorphError`).
@@ -14,6 +17,7 @@ from pathlib import Path
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.Message import Message, Message_Gravity
 from OCP.STEPControl import STEPControl_AsIs, STEPControl_Reader, STEPControl_Writer
+from OCP.TColStd import TColStd_SequenceOfAsciiString
 from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS_Shape
@@ -88,6 +92,7 @@ def read_through(reader, path: Path, transfer, one_shape) -> TopoDS_Shape:
         raise StepReadError(f"cannot read STEP file {path}: {exc}") from exc
     if status != IFSelect_RetDone:
         raise refused(path, status)
+    _say_length_unit(getattr(reader, "Reader", lambda: reader)(), path)
     try:
         transferred = transfer()
     except Exception as exc:
@@ -95,6 +100,27 @@ def read_through(reader, path: Path, transfer, one_shape) -> TopoDS_Shape:
     if not transferred:
         raise StepReadError(f"STEP file {path} holds no shape the kernel can transfer")
     return check_step_shape(one_shape(), path)
+
+
+#: The length unit names the kernel gives for millimetres (``FileUnits``).
+_MILLIMETRES = ("millimetre", "millimeter", "mm")
+
+
+def length_unit(reader: STEPControl_Reader) -> str | None:
+    """The length unit a read STEP file states (``"millimetre"``, ``"metre"``, ``"INCH"``, ... as the kernel
+    names it), None where it states none."""
+    lengths, angles, solid_angles = (TColStd_SequenceOfAsciiString() for _ in range(3))
+    reader.FileUnits(lengths, angles, solid_angles)
+    return lengths.Value(1).ToCString() if lengths.Length() else None
+
+
+def _say_length_unit(reader: STEPControl_Reader, path: Path) -> None:
+    """Warn where the file at ``path`` states its lengths in another unit than millimetres (the kernel reads
+    them in millimetres, and the cold part is written in millimetres)."""
+    unit = length_unit(reader)
+    if unit is not None and unit.lower() not in _MILLIMETRES:
+        log.warning("%s states its lengths in %s: hot2cold reads and writes in millimetres, so the cold part is "
+                    "in millimetres", path.name, unit.lower())
 
 
 def write_step(shape: TopoDS_Shape, path: str | os.PathLike, verify: bool = False) -> None:
