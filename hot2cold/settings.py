@@ -179,3 +179,27 @@ class Settings:
         node = self.node_distance if self.node_distance is not None else self.node_distance_rel * diagonal
         edge = self.edge_distance if self.edge_distance is not None else self.edge_distance_rel * diagonal
         return node, edge
+
+
+#: The options a message may name that are keywords of :func:`hot2cold.morph`, not fields of :class:`Settings`
+#: (option name -> keyword); the option names are the command line's (``--field-units``: ``field_units``).
+MORPH_KEYWORDS = {"field": "field", "field_units": "units", "field_name": "field_name", "field_step": "field_step",
+                  "columns": "columns", "field_points": "field_points", "invert": "invert"}
+
+#: A message's option in Python words (:func:`option`): ``morph(units='m')``, ``Settings(extrapolate=True)``.
+OPTION_WORDS = r"\b(morph|Settings)\((\w+)=([^()]*)\)"
+
+
+def option(name: str, value=...) -> str:
+    """How a message of the library names option ``name`` (the command line's name: ``field_units``,
+    ``node_distance``, ``field`` for the field argument) with ``value``: in Python's words, a keyword of
+    :func:`hot2cold.morph` (``morph(units='m')``) or a :class:`Settings` field (``Settings(extrapolate=True)``;
+    ``...`` for no value).  The command line and a batch say it in their own words
+    (:func:`hot2cold.cli.options.in_words` reads :data:`OPTION_WORDS`)."""
+    if name in MORPH_KEYWORDS:
+        api, keyword = "morph", MORPH_KEYWORDS[name]
+    elif name in Settings.__dataclass_fields__:
+        api, keyword = "Settings", name
+    else:
+        raise ValueError(f"no option {name!r}: a keyword of morph ({', '.join(MORPH_KEYWORDS)}) or a Settings field")
+    return f"{api}({keyword}={'...' if value is ... else repr(value)})"

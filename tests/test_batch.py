@@ -384,3 +384,21 @@ def test_the_worker_initializer_imports_no_numpy():
     code = "import sys, hot2cold.cli.workers; print(sorted({'numpy', 'hot2cold.cli.commands'} & set(sys.modules)))"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == "[]"
+
+
+def test_a_jobs_messages_name_the_options_in_the_jobs_files_words(project, fields):
+    """A job refused for a field in metres is told to set its jobs-file column, not a command-line flag or a
+    Python setting (the library's messages name options in Python's words; a batch says them in its own)."""
+    import numpy as np
+
+    from hot2cold.cli.batch import read_jobs, run_job
+
+    table = np.loadtxt(fields[0], delimiter=",", skiprows=1)
+    table[:, 1:] *= 1e-3
+    np.savetxt(project / "metres.csv", table, delimiter=",", header="id,x,y,z,dx,dy,dz", comments="")
+    (job,) = read_jobs(_jobs_csv(project, ["m,hot.step,metres.csv,cold/m.step,"]))
+    result = run_job(job)
+    assert result["status"] == "failed" and result["exit_code"] == 2
+    assert result["message"].endswith("the field looks like metres: use field_units = m in the jobs file"), \
+        result["message"]
+    assert "--field-units" not in result["message"] and "morph(" not in result["message"]

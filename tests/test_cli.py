@@ -18,6 +18,8 @@ from hot2cold.kernel.validity import check_solids
 from hot2cold.kernel.step import read_step
 from hot2cold.testing.synthetic import AffineField
 
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_parts"
+
 FIELD = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, translation=(0.1, -0.2, 0.05))
 
 
@@ -267,3 +269,35 @@ def test_the_log_goes_to_stderr_through_the_hot2cold_logger(monkeypatch, capsys)
     assert capsys.readouterr().err == ""
     assert seen == [before[0]] * 3
     assert (list(root.handlers), list(ours.handlers), ours.level) == before
+
+
+def test_the_librarys_option_words_are_said_in_the_command_lines_and_the_jobs_files():
+    """The library names an option in Python's words (:func:`hot2cold.settings.option`); the command line says
+    its flag (a switch without its value, the FIELD argument by name), a batch its jobs-file column; a setting the
+    command line does not take keeps Python's words."""
+    from hot2cold.cli.options import in_words
+    from hot2cold.settings import option
+
+    text = (f"use {option('field_units', 'm')}, or {option('extrapolate', True)}; raise {option('node_distance')}; "
+            f"give ({option('field')}); choose with {option('columns', 'dx=UX')}; {option('g2_tolerance', 0.1)}")
+    assert text == ("use morph(units='m'), or Settings(extrapolate=True); raise Settings(node_distance=...); give "
+                    "(morph(field=...)); choose with morph(columns='dx=UX'); Settings(g2_tolerance=0.1)")
+    assert in_words(text) == ("use --field-units m, or --extrapolate; raise --node-distance; give (the FIELD "
+                              "argument); choose with --columns dx=UX; Settings(g2_tolerance=0.1)")
+    assert in_words(text, jobs=True) == (
+        "use field_units = m in the jobs file, or extrapolate = true in the jobs file; raise the jobs file's "
+        "node_distance column; give (the jobs file's field column); choose with columns = dx=UX in the jobs file; "
+        "Settings(g2_tolerance=0.1)")
+    with pytest.raises(ValueError, match="no option 'field_unit'"):
+        option("field_unit", "m")
+
+
+def test_a_python_user_reads_python_words(tmp_path):
+    """From Python the same refusal names the keyword of morph(), not a flag."""
+    from hot2cold import morph
+    from hot2cold.errors import FieldError
+
+    nodes = np.loadtxt(SAMPLES / "twisted_blade_field.csv", delimiter=",", skiprows=1)[::8]
+    with pytest.raises(FieldError) as info:
+        morph(SAMPLES / "twisted_blade.step", (nodes[:, 1:4] * 1e-3, nodes[:, 4:7] * 1e-3))
+    assert str(info.value).endswith("the field looks like metres: use morph(units='m')"), str(info.value)

@@ -375,7 +375,7 @@ def test_missing_columns(tmp_path):
     still refused, with what it found and how to map the columns."""
     msg = raises(write(tmp_path, "id,X,Y,Z,VX,VY,VZ\n1,0,0,0,0,0,0\n"), r"lacks column\(s\) dx, dy, dz")
     assert "'VX', 'VY', 'VZ'" in msg and "'X'" in msg
-    assert "comma-separated" in msg and "--columns x=NAME" in msg
+    assert "comma-separated" in msg and "morph(columns='x=NAME,...,dz=NAME')" in msg
 
 
 @pytest.mark.parametrize("header, ids", [
@@ -427,13 +427,13 @@ def test_columns_mapping(tmp_path):
     """``--columns``: names the table does not know, and a choice between two it does."""
     rows = "\n".join(",".join(map(str, np.r_[P[k], D[k], D[k] * 2])) for k in range(len(P)))
     path = write(tmp_path, "px,py,pz,ux,uy,uz,dx,dy,dz\n" + rows + "\n")
-    raises(path, r"columns 'ux' and 'dx' both give dx; keep one, or choose with --columns dx=NAME")
+    raises(path, r"columns 'ux' and 'dx' both give dx; keep one, or choose with morph\(columns='dx=NAME'\)")
     f = read_field(path, columns="x=PX, y=py ,z=Pz,dx=dx,dy=dy,dz=dz")
     np.testing.assert_array_equal(f.points, P)
     np.testing.assert_array_equal(f.displacements, D * 2)
     g = read_field(path, columns={"x": "px", "y": "py", "z": "pz", "dx": "ux", "dy": "uy", "dz": "uz"})
     np.testing.assert_array_equal(g.displacements, D)
-    raises(path, r"--columns maps x to 'qx', which the header does not have", columns="x=qx,y=py,z=pz")
+    raises(path, r"morph\(columns=\.\.\.\) maps x to 'qx', which the header does not have", columns="x=qx,y=py,z=pz")
     raises(path, r"columns unknown column key 'w'", columns="w=px")
     raises(path, r"columns 'px' is no key=name pair", columns="px")
     raises(path, r"columns column key 'x' is given twice", columns="x=px,x=py")

@@ -549,7 +549,7 @@ def test_the_report_says_when_the_rounds_ran_out(blade_1mm):
     assert not result.report.tolerance_met
     lines = [line for line in result.report.table().splitlines() if line.startswith(("face", "edge"))
              and "refined:" in line]
-    assert lines and any(line.endswith("it still misses after the most rounds allowed (--max-refinements)")
+    assert lines and any(line.endswith("it still misses after the most rounds allowed (Settings(max_refinements=...))")
                          for line in lines)
     met = morph(shape, (nodes, _bend(2e-4)(nodes)), Settings(max_refinements=1), check=False)
     assert not any("most rounds allowed" in line for line in met.report.table().splitlines())

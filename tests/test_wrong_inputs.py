@@ -119,7 +119,7 @@ def test_cold_positions_with_hot_to_cold_displacements(tmp_path, capsys, blade_f
                     r"\(0\.109 mm\) of it so and 3\d % as given", message), message
     assert "the positions are displaced ones (the cold part's, where the displacements go from hot to cold)" in message
     assert "write x-dx, y-dy, z-dz in its x, y, z columns, the displacements as they are" in message
-    assert "give --invert (batch column invert) if they go from cold to hot" in message
+    assert "give --invert if they go from cold to hot" in message
 
 
 def test_cold_positions_with_cold_to_hot_displacements(tmp_path, capsys, blade_field):
@@ -135,7 +135,7 @@ def test_cold_positions_with_cold_to_hot_displacements(tmp_path, capsys, blade_f
             "hot part's positions and displacements from hot to cold: write x+dx, y+dy, z+dz in its x, y, z columns "
             "and -dx, -dy, -dz in its dx, dy, dz columns") in message
     # --invert is no fix for it: that takes a cold-to-hot field at the hot part's nodes
-    assert message.endswith("--invert (batch column invert) is not for this: it takes a cold-to-hot field at the "
+    assert message.endswith("--invert is not for this: it takes a cold-to-hot field at the "
                             "hot part's nodes")
 
 
@@ -147,7 +147,7 @@ def test_cold_positions_with_cold_to_hot_displacements_and_invert(tmp_path, caps
     message = _refused(capsys, tmp_path, BLADE, field, "--invert")
     assert "mixes up hot and cold: its positions plus its displacements lie on the hot part" in message
     assert "write x+dx, y+dy, z+dz in its x, y, z columns and -dx, -dy, -dz in its dx, dy, dz columns" in message
-    assert "and drop --invert (batch column invert)" in message
+    assert "and drop --invert" in message
 
 
 def test_displaced_positions_with_invert(tmp_path, capsys, blade_field):
@@ -155,7 +155,7 @@ def test_displaced_positions_with_invert(tmp_path, capsys, blade_field):
     field = _csv(tmp_path / "displaced.csv", f.points + f.displacements, f.displacements)
     message = _refused(capsys, tmp_path, BLADE, field, "--invert")
     assert "its positions minus its displacements lie on the hot part" in message
-    assert message.endswith("and keep --invert (batch column invert) only if they go from cold to hot")
+    assert message.endswith("and keep --invert only if they go from cold to hot")
 
 
 def test_mix_up_in_npz_and_solver_files_is_fixed_in_their_words(tmp_path, capsys, block):
@@ -232,13 +232,13 @@ def test_no_unit_guess_off_a_unit_factor(tmp_path, capsys, box):
     message = _refused(capsys, tmp_path, step, _csv(tmp_path / "top.csv", on_top, FIELD(nodes) / 20))
     assert re.match(r".*top\.csv covers only part of the solid: .*; the nodes do not lie on this part: \d+ % of them "
                     r"are farther than 0\.0173 mm from it \(the field spans 0\.866 mm, the part "
-                    r"17\.32 mm\): give this part's field \(the FIELD argument, batch column field\)$",
+                    r"17\.32 mm\): give this part's field \(the FIELD argument\)$",
                     message), message
     inside = nodes / 20 + 2.0
     message = _refused(capsys, tmp_path, step, _csv(tmp_path / "inside.csv", inside, FIELD(nodes) / 20), out="out2")
     assert re.match(r"no FE node of .*inside\.csv lies within 0\.0173 mm of the part: the nodes do not lie on this "
                     r"part \(they are [\d.]+ to [\d.]+ mm from its centre; the field spans 0\.866 mm, the part "
-                    r"17\.32 mm\): give this part's field \(the FIELD argument, batch column field\)$",
+                    r"17\.32 mm\): give this part's field \(the FIELD argument\)$",
                     message), message
     assert "looks like" not in message and "inches" not in message
 
@@ -253,7 +253,7 @@ def test_inches_in_a_solver_file_are_not_converted(tmp_path, capsys, box):
     assert "convert" not in message
     message = _refused(capsys, tmp_path, step, _frd(tmp_path / "metres.frd", nodes / 1000, FIELD(nodes) / 1000),
                        out="out_m")
-    assert message.endswith("the field looks like metres: use --field-units m (batch column field_units)")
+    assert message.endswith("the field looks like metres: use --field-units m")
     rst = _unit_hint(1 / 25.4, "rst")
     assert "convert" not in rst and "/UNITS,BIN" in rst
     assert "where the .rst states no length unit" in _unit_hint(1e-3, "rst")
@@ -265,7 +265,7 @@ def test_another_parts_field_is_named_as_such(tmp_path, capsys):
     assert re.match(r".*twisted_blade_field\.csv covers only part of the solid: 5 of its 18 faces get no FE node "
                     r".*; the nodes do not lie on this part: 99 % of them are farther than 0\.0762 mm from it \(\d+ % "
                     r"outside it; the field spans 108\.8 mm, the part 76\.16 mm\): give this part's field \(the FIELD "
-                    r"argument, batch column field\)$", message), message
+                    r"argument\)$", message), message
     assert "units" not in message and "looks like" not in message
 
 
@@ -293,7 +293,7 @@ def test_nodes_outside_the_part_are_warned_about(box, caplog):
                                       r"part's; they are ignored$", far[0]), far
     near = _coverage(part, np.concatenate([nodes, 1.006 * nodes[::2]]), caplog)
     assert len(near) == 1 and "most of them within 0.173 mm of it" in near[0] and (
-        "raise --node-distance (batch column node_distance)" in near[0]), near
+        "raise Settings(node_distance=...)" in near[0]), near
 
 
 def test_volume_nodes_and_a_few_strays_are_not_warned_about(box, caplog):

@@ -37,7 +37,7 @@ from typing import Callable, Iterator
 from .. import __version__
 from ..errors import Hot2ColdError, InputError, one_line
 from ..io.inputs import check_input_file
-from .options import MorphOptions, to_path, to_text
+from .options import MorphOptions, in_words, to_path, to_text
 from .run import VIEWS, run_morph, tolerance_missed, view_outputs, write_cold, write_json, write_views
 from .workers import one_thread_each
 
@@ -327,7 +327,7 @@ class _Warnings(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         if record.thread == self.thread:
-            self.lines.append(f"{record.name}: {record.getMessage()}")
+            self.lines.append(in_words(f"{record.name}: {record.getMessage()}", jobs=True))
 
 
 def run_job(job: Job) -> dict:
@@ -358,7 +358,8 @@ def run_job(job: Job) -> dict:
         missed = tolerance_missed(result)
         status, code = ("tolerance-missed", 5) if missed else ("ok", 0)
         verdict = result.report.verdict
-        out = _result(job, status, code, missed or "", result.report.delta_max, time.perf_counter() - start,
+        out = _result(job, status, code, in_words(missed or "", jobs=True), result.report.delta_max,
+                      time.perf_counter() - start,
                       verdict=verdict.state.value, verdict_text=verdict.text,
                       cpu_seconds=round(time.process_time() - cpu, 3), **where)
         if inputs is not None:
@@ -371,7 +372,8 @@ def run_job(job: Job) -> dict:
         log.info("job %s: %s in %.1f s", job.name, status, out["seconds"])
         return out
     except Hot2ColdError as exc:
-        return _result(job, "failed", exc.exit_code, one_line(exc), seconds=time.perf_counter() - start, **where)
+        return _result(job, "failed", exc.exit_code, in_words(one_line(exc), jobs=True),
+                       seconds=time.perf_counter() - start, **where)
     except Exception as exc:    # a bug or the unexpected: recorded like `hot2cold morph`'s internal error
         log.debug("job %s: internal error", job.name, exc_info=True)
         return _result(job, "failed", 70, f"internal error: {type(exc).__name__}: {one_line(exc)}",

@@ -34,7 +34,7 @@ from .. import __version__
 from ..errors import Hot2ColdError, InputError, OutputError, StepReadError
 from ..io.field import FIELD_FORMATS
 from ..io.inputs import check_input_file
-from .options import MorphOptions
+from .options import MorphOptions, in_words
 
 log = logging.getLogger("hot2cold")
 
@@ -235,7 +235,7 @@ def _morph(args) -> int:
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
-        print(result.report.table())    # the verdict its first line
+        print(in_words(result.report.table()))    # the verdict its first line
     missed = tolerance_missed(result)
     written = args.written = []         # for the messages of a failure or an interruption from here on
     what = {path: name for name, path in _outputs(args)}
@@ -334,6 +334,13 @@ def _batch(args) -> int:
     return data["exit_code"]
 
 
+class _InWords(logging.Formatter):
+    """The log lines of a run, the options they name in the command line's words (:func:`.options.in_words`)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return in_words(super().format(record))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``hot2cold`` console script; returns the exit code."""
     args = _parser().parse_args(argv)
@@ -341,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     # The handler is hot2cold's own, for this call only; the root logger is left to the application.
     level = logging.ERROR if args.quiet else logging.INFO if args.verbose else logging.WARNING
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    handler.setFormatter(_InWords("%(levelname)s %(name)s: %(message)s"))
     handler.setLevel(level)
     saved = log.level
     log.addHandler(handler)
@@ -357,7 +364,7 @@ def _run(args) -> int:
     try:
         return _batch(args) if args.command == "batch" else _morph(args)
     except Hot2ColdError as exc:
-        print(f"hot2cold: error: {exc}", file=sys.stderr)
+        print(f"hot2cold: error: {in_words(str(exc))}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         written = getattr(args, "written", [])

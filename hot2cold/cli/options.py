@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from pathlib import Path
@@ -23,7 +24,7 @@ from typing import Callable
 
 from ..errors import InputError
 from ..io.field import UNITS
-from ..settings import Continuity, Settings
+from ..settings import MORPH_KEYWORDS, OPTION_WORDS, Continuity, Settings
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -263,3 +264,37 @@ class MorphOptions:
         skip-on-rerun: its keys and values must not change for the same options)."""
         return {name: str(value) if isinstance(value, Path) else value
                 for name, value in ((name, getattr(self, name)) for name in self.names())}
+
+
+def _plain(value: str) -> str:
+    """A value as Python's ``repr`` wrote it (:func:`hot2cold.settings.option`), as a command line or a jobs file
+    writes it: without quotes, ``true`` for ``True``."""
+    if len(value) > 1 and value[0] == value[-1] and value[0] in "'\"":
+        return value[1:-1]
+    return value.lower() if value in ("True", "False") else value
+
+
+def in_words(text: str, jobs: bool = False) -> str:
+    """``text``, a message of the library, with each option it names in Python's words
+    (:func:`hot2cold.settings.option`: ``morph(units='m')``, ``Settings(extrapolate=True)``) said as ``hot2cold
+    morph`` takes it (``--field-units m``, ``--extrapolate``, the FIELD argument) or, with ``jobs``, as a batch
+    jobs file does (``field_units = m`` in the jobs file).  A setting the command line does not take keeps
+    Python's words."""
+    table = MorphOptions.table()
+    by_python = {("morph", keyword): name for name, keyword in MORPH_KEYWORDS.items()}
+    by_python.update({("Settings", name): name for name in table if name not in MORPH_KEYWORDS})
+
+    def say(match: re.Match) -> str:
+        api, keyword, value = match.groups()
+        name = by_python.get((api, keyword))
+        if name is None:
+            return match.group(0)
+        shown = None if value == "..." else _plain(value)
+        if jobs:
+            return f"the jobs file's {name} column" if shown is None else f"{name} = {shown} in the jobs file"
+        if name == "field":
+            return "the FIELD argument"
+        opt = table[name]
+        return opt.flag if shown is None or opt.type is None else f"{opt.flag} {shown}"
+
+    return re.sub(OPTION_WORDS, say, text)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from ..errors import FieldError
+from ..settings import option
 
 #: The six columns of a field, in the order of :attr:`DisplacementField.points` and ``displacements``.
 REQUIRED_COLUMNS = ("x", "y", "z", "dx", "dy", "dz")
@@ -133,8 +134,8 @@ def assign(shown: list[str], path: str, mapping: Mapping[str, str] | None = None
     mapping = dict(mapping or {})
     for key, name in mapping.items():
         if name not in names:
-            raise FieldError(f"field file {path}: --columns maps {key} to {name!r}, which the header does not "
-                             f"have (header: {', '.join(map(repr, shown))})")
+            raise FieldError(f"field file {path}: {option('columns')} maps {key} to {name!r}, which the header does "
+                             f"not have (header: {', '.join(map(repr, shown))})")
     found: dict[str, int] = {}
     for key in (*REQUIRED_COLUMNS, ID_KEY):
         if key in mapping:
@@ -148,7 +149,7 @@ def assign(shown: list[str], path: str, mapping: Mapping[str, str] | None = None
         if len(hits) > 1:
             raise FieldError(
                 f"field file {path}: columns {' and '.join(repr(shown[i]) for i in hits)} both give {key}; "
-                f"keep one, or choose with --columns {key}=NAME")
+                f"keep one, or choose with {option('columns', f'{key}=NAME')}")
         if hits:
             found[key] = hits[0]
     missing = [c for c in REQUIRED_COLUMNS if c not in found]
@@ -163,7 +164,8 @@ def assign(shown: list[str], path: str, mapping: Mapping[str, str] | None = None
 
 #: What a text table's header must say, for messages.
 HINT = ("the header must name the columns " + ",".join(REQUIRED_COLUMNS) + " (any order, any case; ux,uy,uz, "
-        "U1,U2,U3, 'X Location (mm)' and the like also do), or map them with --columns x=NAME,...,dz=NAME")
+        "U1,U2,U3, 'X Location (mm)' and the like also do), or map them with "
+        + option("columns", "x=NAME,...,dz=NAME"))
 
 
 def _magnitude_hint(names: list[str], shown: list[str], missing: list[str]) -> str:

@@ -76,6 +76,7 @@ from .cells import element_triangles
 
 from .columns import ALIASES, HINT, ID_COLUMNS, REQUIRED_COLUMNS, STATED_UNITS, assign, normalise, parse_mapping
 from .inputs import read_input_bytes
+from ..settings import option
 
 __all__ = ["DisplacementField", "UNITS", "REQUIRED_COLUMNS", "ID_COLUMNS", "DISPLACEMENT_NAMES", "FIELD_FORMATS",
            "read_field",
@@ -328,7 +329,7 @@ def read_field(path, units: str | None = None, field_name: str | None = None, *,
         if field_name is not None:
             raise FieldError(
                 f"field_name applies to .frd, .npz, solver result and mesh files; the text table {fspath} needs "
-                f"the columns {','.join(REQUIRED_COLUMNS)} (or --columns)")
+                f"the columns {','.join(REQUIRED_COLUMNS)} (or {option('columns')})")
         field, stated = _parse_text(raw, fspath, mapping)
     field = _in_mm(field, units, stated, fspath)
     log.info("read %d nodes from %s (%s, units %s)", len(field), fspath, kind.partition(":")[0],
@@ -346,7 +347,7 @@ def _in_mm(field: DisplacementField, units: str | None, stated: dict[str, str | 
         for what, unit in said.items():
             if STATED_UNITS[unit] != _unit_factor(units):
                 raise FieldError(f"field file {path} states its {what} in {unit}, but the field units were "
-                                 f"given as {units.strip().lower()}: drop --field-units (units=) to take the "
+                                 f"given as {units.strip().lower()}: drop {option('field_units')} to take the "
                                  f"file's, or fix the file")
         factor = _unit_factor(units)
         return field if factor == 1.0 else field.scaled(factor)
@@ -654,8 +655,8 @@ def _parse_solver(kind: str, path: str, field_name: str | None, step: int | None
     if points_from is not None:
         points = match_points(points_from, result.node_ids, None, path)
     elif points is None:
-        raise FieldError(f"{path} holds no node positions; pass the model they belong to (--field-points "
-                         f"model.bdf, points_from=) to take them by node number")
+        raise FieldError(f"{path} holds no node positions; pass the model they belong to "
+                         f"({option('field_points', 'model.bdf')}) to take them by node number")
     return (DisplacementField(points, result.displacements, result.node_ids, source=path,
                               triangles=getattr(result, "triangles", None)), getattr(result, "unit", None))
 

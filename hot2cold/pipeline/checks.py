@@ -40,7 +40,7 @@ from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
 from ..kernel.tessellate import tessellate
 from ..kernel.topology import broken_solid, solid_fault
-from ..settings import Settings
+from ..settings import Settings, option
 
 if TYPE_CHECKING:
     pass
@@ -69,7 +69,7 @@ def check_hot(part: Part, hot_checks: list[SolidCheck]) -> None:
 
 #: Length ratios (field extent / part extent) that betray a unit mix-up, and what to tell the user of a text
 #: table (:func:`_unit_hint` says it for the other files).
-_UNIT_HINTS = ((1e-3, "the field looks like metres: use --field-units m (units='m')"),
+_UNIT_HINTS = ((1e-3, f"the field looks like metres: use {option('field_units', 'm')}"),
                (1 / 25.4, "the field looks like inches: convert it to mm"),
                (1e3, "the field is 1000 times larger than the part: is the part in metres or the field in µm?"),
                (25.4, "the field is 25.4 times larger than the part: is the part modelled in inches but written "
@@ -98,14 +98,16 @@ def _unit_hint(factor: float, kind: str) -> str:
         return text
     if factor == 1e-3:
         if kind == "rst":
-            return ("the field looks like metres: use --field-units m (batch column field_units) where the .rst "
+            return (f"the field looks like metres: use {option('field_units', 'm')} where the .rst "
                     "states no length unit; where it states one, the model's unit system (/UNITS) is not the one "
                     "its numbers are in")
-        return "the field looks like metres: use --field-units m (batch column field_units)"
+        return f"the field looks like metres: use {option('field_units', 'm')}"
     if kind == "npz":
-        return ("the field looks like inches, which --field-units (mm or m) does not take: save its points and "
+        return (f"the field looks like inches, which {option('field_units')} (mm or m) does not take: save its "
+                "points and "
                 "displacements in mm")
-    return ("the field looks like inches, which --field-units (mm or m) does not take: export its nodes and "
+    return (f"the field looks like inches, which {option('field_units')} (mm or m) does not take: export its "
+            "nodes and "
             "displacements as a CSV whose column headers state the unit, e.g. 'x (in)'"
             + (", or give the model the inch unit system (/UNITS,BIN), which the .rst then states" if kind == "rst"
                else ""))
@@ -186,7 +188,7 @@ def _mix_up_fix(plus: bool, inverted: bool, kind: str) -> str:
     """What hot and cold mixed up means and how to give the field instead (:func:`check_positions`): ``plus``,
     the given positions plus the given displacements lie on the hot part (else minus); ``inverted``, the field
     was given with --invert; ``kind``, :func:`_file_kind`."""
-    invert = "--invert (batch column invert)"
+    invert = option("invert", True)
     if plus:
         how = {"text": "write x+dx, y+dy, z+dz in its x, y, z columns and -dx, -dy, -dz in its dx, dy, dz columns",
                "npz": "save points + displacements as its points and -displacements as its displacements"}.get(
@@ -357,13 +359,12 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
             raise FieldError(
                 f"no FE node of {source} lies within {cls.node_distance:.3g} mm of the part: the nodes do not lie on "
                 f"this part (they are {spread.min():.4g} to {spread.max():.4g} mm from its centre; the field spans "
-                f"{extent:.4g} mm, the part {part.diagonal:.4g} mm): give this part's field (the FIELD argument, "
-                f"batch column field)")
+                f"{extent:.4g} mm, the part {part.diagonal:.4g} mm): give this part's field ({option('field')})")
         raise FieldError(
             f"no FE node of {source} lies within {cls.node_distance:.3g} mm of the part "
             f"(nodes are {spread.min():.4g} to {spread.max():.4g} mm from its centre, the part is "
-            f"{part.diagonal:.4g} mm across): check the field's units (--field-units) and that it belongs to "
-            f"this part, or raise --node-distance")
+            f"{part.diagonal:.4g} mm across): check the field's units ({option('field_units')}) and that it "
+            f"belongs to this part, or raise {option('node_distance')}")
     _check_displacements(part, cls, field, settings)
     outside = None
     if 1.0 - used > _OUTSIDE_SHARE:
@@ -380,7 +381,7 @@ def check_coverage(part: Part, cls: Classification, field: DisplacementField, se
     if outside is not None and outside.share > _OUTSIDE_SHARE:
         why = (f"most of them within {_NEAR_OUTSIDE * cls.node_distance:.3g} mm of it: the FE model's geometry is "
                f"not this part's to within the node distance (another version of the part?); check the field, or "
-               f"raise --node-distance (batch column node_distance) where the difference is accepted"
+               f"raise {option('node_distance')} where the difference is accepted"
                if outside.near >= 0.5 else
                "nodes of other parts, or another part's field: check that the field is this part's")
         log.warning("%s: %s %% of its nodes lie outside the part, farther than %.3g mm from every face, more "
@@ -442,16 +443,16 @@ def _check_faces(part: Part, cls: Classification, field: DisplacementField, sett
             raise FieldError(
                 f"{source} covers only part of the solid: {what}; and {int(outside.sum())} of its {len(field)} "
                 f"nodes ({100 * share:.0f} %) lie outside the part's bounding box: it looks like another part's "
-                f"field, and --extrapolate (Settings.extrapolate) would morph the part from the few nodes on it; "
+                f"field, and {option('extrapolate', True)} would morph the part from the few nodes on it; "
                 f"give this part's field")
         log.warning("%s covers only part of the solid: %s; they are morphed from the field of the other faces, "
-                    "extrapolated (--extrapolate)", source, what)
+                    "extrapolated (%s)", source, what, option("extrapolate", True))
         return
     if foreign:
         raise FieldError(f"{source} covers only part of the solid: {what}; {foreign}: give this part's field "
-                         f"(the FIELD argument, batch column field)")
+                         f"({option('field')})")
     raise FieldError(f"{source} covers only part of the solid: {what}; give a field over the whole part, or "
-                     f"--extrapolate (Settings.extrapolate) to morph such faces from the field of the others")
+                     f"{option('extrapolate', True)} to morph such faces from the field of the others")
 
 
 def _check_displacements(part: Part, cls: Classification, field: DisplacementField, settings: Settings) -> None:
@@ -470,7 +471,7 @@ def _check_displacements(part: Part, cls: Classification, field: DisplacementFie
         f"(row {cls.node[k]} from 0) by {moved[k]:.4g} mm, {100 * share:.3g} % of the part's {part.diagonal:.4g} mm "
         f"diagonal, more than the {100 * settings.max_displacement_rel:.3g} % a hot-to-cold field moves a part: "
         f"are the columns dx,dy,dz cold positions rather than displacements, or is it another part's field? "
-        f"If it is right, raise --max-displacement-rel (Settings.max_displacement_rel)")
+        f"If it is right, raise {option('max_displacement_rel')}")
 
 
 #: The cold part may move a face up to this many times the field's largest displacement (plus the node

@@ -22,7 +22,7 @@ from ..kernel.validity import SolidCheck, face_areas
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
 from ..core.threads import map_threads
-from ..settings import Settings
+from ..settings import Settings, option
 from .grids import GRID_REACH
 
 
@@ -404,7 +404,7 @@ class Report:
         else:
             noise = (f" + {self.allowance:.3g} mm for the field's scatter" if self.allowance > 0.1 * self.tolerance
                      else "")
-            strict = ", knots kept (--keep-knots)" if self.keep_knots else ""
+            strict = f", knots kept ({option('keep_knots', True)})" if self.keep_knots else ""
             head = f"tolerance {self.tolerance:.3g} mm{noise}{strict}: {state.words}"
         # the figures, worst first, but one beyond the limit that misses() does not count (the cold check's grid
         # against the field's local estimate between the nodes, the vertices' nodes) after those it counts, and
@@ -485,8 +485,8 @@ class Report:
         lines.append(f"nodes: {self.nodes_total} total{inside}, {self.nodes_used} used "
                      f"({self.nodes_on_faces} inside a face, {self.nodes_on_edges} within {self.edge_distance:.3g} mm "
                      f"of an edge, {self.nodes_on_vertices} at a vertex), {self.nodes_ignored} ignored: farther than "
-                     f"{self.node_distance:.3g} mm (--node-distance) from every face, e.g. volume nodes of a solid "
-                     f"mesh")
+                     f"{self.node_distance:.3g} mm ({option('node_distance')}) from every face, e.g. volume nodes of "
+                     f"a solid mesh")
         for s in self.solids:
             name = f" {s.name!r}" if s.name else ""
             lines.append(f"solid {s.index}{name}: {'valid' if s.valid else 'INVALID'}, "
@@ -516,7 +516,7 @@ class Report:
                     f"them do not follow them)" if unresolved else short)
             stop = "" if not self._misses(r) else (f"; where it still misses, {left}" if not r.get("refinable", True)
                                                    else "; it still misses after the most rounds allowed "
-                                                        "(--max-refinements)")
+                                                        f"({option('max_refinements')})")
             lines.append(f"face {r['face']} refined: {r['net_before']} -> {r['net_after']} poles{degree} "
                          f"(+{r['knots_added_u']} u, +{r['knots_added_v']} v knots, {r['rounds']} rounds), "
                          f"{change}{stop}")
@@ -534,7 +534,7 @@ class Report:
                       if r["degree_before"] != r["degree_after"] else "")
             stop = "" if not self._misses(r) else (f"; where it still misses, {short}" if not r["refinable"]
                                                    else "; it still misses after the most rounds allowed "
-                                                        "(--max-refinements)")
+                                                        f"({option('max_refinements')})")
             lines.append(f"edge {r['edge']} refined: {r['poles_before']} -> {r['poles_after']} poles{degree} "
                          f"(+{r['knots_added']} knots, {r['rounds']} rounds), {change}{stop}")
         return lines
