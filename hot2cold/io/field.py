@@ -369,7 +369,10 @@ def as_field(field, units: str | None = None, field_name: str | None = None, *, 
     Accepts a :class:`DisplacementField` (returned as it is unless it has duplicate nodes, see
     :func:`merge_duplicates`; it is already in mm, so ``units`` must be ``"mm"`` or None), a path (``str`` or
     ``os.PathLike``; see :func:`read_field`, which gets ``units``, ``field_name``, ``step``, ``columns`` and
-    ``points_from``), or a pair ``(points, displacements)`` of (N, 3) array-likes in ``units`` (None: mm).
+    ``points_from``), a ``meshio.Mesh`` or a pyvista dataset in ``units`` (None: mm) with a point displacement
+    array (named as in a mesh file, or ``field_name``; its tetrahedra and triangles give the boundary
+    ``triangles``, as a mesh file's do), or a pair ``(points, displacements)`` of (N, 3) array-likes in
+    ``units``.
     Duplicate nodes are merged or refused (:func:`merge_duplicates`).
     """
     if isinstance(field, (str, bytes, os.PathLike)):
@@ -383,13 +386,19 @@ def as_field(field, units: str | None = None, field_name: str | None = None, *, 
                 f"a DisplacementField is already in mm, so units={units!r} cannot apply to it; "
                 f"use field.scaled(...) or pass units='mm'")
         return merge_duplicates(field)
+    mesh = _in_memory_mesh(field)
+    if mesh is not None:
+        name = type(field).__name__
+        result = _mesh_field(mesh, f"the {name} given", f"{name} in memory", field_name)
+        return merge_duplicates(result.scaled(factor) if factor != 1.0 else result)
     if isinstance(field, (tuple, list)) and len(field) == 2:
         points, displacements = field
         result = DisplacementField(points, displacements, source="arrays")
         return merge_duplicates(result.scaled(factor) if factor != 1.0 else result)
     raise FieldError(
         f"cannot make a displacement field from {type(field).__name__}: pass a DisplacementField, "
-        f"a file path, or a (points, displacements) pair of (N, 3) arrays")
+        f"a file path, a meshio.Mesh or pyvista dataset with a point displacement array, or a (points, "
+        f"displacements) pair of (N, 3) arrays")
 
 
 def merge_duplicates(field: DisplacementField) -> DisplacementField:
@@ -668,7 +677,13 @@ def _parse_meshio(path: str, file_format: str | None, field_name: str | None) ->
         raise FieldError(
             f"reading {path} needs meshio: pip install 'hot2cold[fe]' (or convert the field to CSV or .npz)"
         ) from None
-    mesh = _meshio_read(meshio, path, file_format)
+    return _mesh_field(_meshio_read(meshio, path, file_format), f"mesh file {path}", path, field_name)
+
+
+def _mesh_field(mesh, what: str, source: str, field_name: str | None) -> DisplacementField:
+    """The field of a ``meshio.Mesh``: its points and the point field named ``field_name`` (default the first of
+    :data:`DISPLACEMENT_NAMES`), its tetrahedra's and triangles' boundary as ``triangles``; ``what`` names the
+    mesh in messages ("mesh file PATH"), ``source`` becomes the field's."""
     data = dict(mesh.point_data)
     found = ", ".join(f"{k!r} {np.shape(v)}" for k, v in data.items()) or "none"
     if field_name is not None:
@@ -678,14 +693,14 @@ def _parse_meshio(path: str, file_format: str | None, field_name: str | None) ->
             key = folded[0] if len(folded) == 1 else None
         if key is None:
             raise FieldError(
-                f"mesh file {path} has no point field {field_name!r} (point fields: {found})"
+                f"{what} has no point field {field_name!r} (point fields: {found})"
                 + _cell_hint(mesh, field_name))
     else:
         key = next((k for name in DISPLACEMENT_NAMES for k in data if k.lower() == name), None)
         if key is None:
             raise FieldError(
-                f"mesh file {path} has no displacement point field named U, displacement, displacements or "
-                f"DISP (point fields: {found}); name the field with field_name=...")
+                f"{what} has no displacement point field named U, displacement, displacements or "
+                f"DISP (point fields: {found}); name the field with {option('field_name')}")
     points = np.asarray(mesh.points, dtype=np.float64)
     values = np.asarray(data[key])
     if points.ndim == 2 and points.shape[1] == 2:  # a 2D mesh: z = 0
@@ -694,24 +709,39 @@ def _parse_meshio(path: str, file_format: str | None, field_name: str | None) ->
             values = np.column_stack([values, np.zeros(len(values))])
     if values.ndim != 2 or values.shape != (len(points), 3):
         raise FieldError(
-            f"mesh file {path}: point field {key!r} has shape {values.shape}, but a displacement needs one "
+            f"{what}: point field {key!r} has shape {values.shape}, but a displacement needs one "
             f"(x, y, z) vector per point: shape ({len(points)}, 3)")
     if values.dtype.kind not in "iuf":
-        raise FieldError(f"mesh file {path}: point field {key!r} holds {values.dtype} values, not numbers")
+        raise FieldError(f"{what}: point field {key!r} holds {values.dtype} values, not numbers")
     # The field's rows are meshio's points, in its order (none dropped): cells index them as they are.
-    return DisplacementField(points, values, None, source=path, triangles=_mesh_triangles(mesh, path))
+    return DisplacementField(points, values, None, source=source, triangles=_mesh_triangles(mesh, source))
 
 
-def _mesh_triangles(mesh, path: str) -> np.ndarray | None:
-    """The boundary triangles of a meshio mesh's cells (rows of its points), see :func:`element_triangles`."""
+def _in_memory_mesh(field):
+    """A ``meshio.Mesh`` of a field given as one or as a pyvista dataset (``pyvista.to_meshio``: PyMAPDL's and
+    DPF's results as pyvista hands them over), None for anything else; recognised by the type's package, so that
+    neither is imported for other inputs."""
+    package = type(field).__module__.partition(".")[0]
+    if package == "meshio" and hasattr(field, "point_data"):
+        return field
+    if package == "pyvista" and hasattr(field, "point_data"):
+        import pyvista
+
+        return pyvista.to_meshio(field)
+    return None
+
+
+def _mesh_triangles(mesh, source: str) -> np.ndarray | None:
+    """The boundary triangles of a meshio mesh's cells (rows of its points), see :func:`element_triangles`;
+    ``source`` names the mesh (its path)."""
     cells: dict[str, list] = {}
     for block in getattr(mesh, "cells", None) or []:
         cells.setdefault(str(block.type), []).append(block.data)
     unused = sorted(k for k in cells if k not in _ELEMENT_NAMES)
     if unused:
-        log.info("mesh file %s: cells of type %s not used (hot2cold takes tetrahedra and triangles)", path,
+        log.info("mesh %s: cells of type %s not used (hot2cold takes tetrahedra and triangles)", source,
                  ", ".join(f"{k} ({sum(len(a) for a in cells[k])})" for k in unused))
-    return element_triangles({k: v for k, v in cells.items() if k in _ELEMENT_NAMES}, path)
+    return element_triangles({k: v for k, v in cells.items() if k in _ELEMENT_NAMES}, source)
 
 
 def _meshio_read(meshio, path: str, file_format: str | None):
