@@ -1,10 +1,10 @@
 """The HTML report's interactive 3D view (twisted blade), checked in headless Chromium.
 
 The page is opened from file:// with every request outside file:, blob: and data: aborted (and none may be
-made): the WebGL canvas must draw the part in several colours, the exaggeration slider and the FE nodes
-checkbox must change the picture, a click on the part must name one of its faces and mark its table row,
-and nothing may be logged as an error.  Chromium (Debian's ``chromium``) and the ``playwright`` package are
-required: without them the browser tests fail, saying what to install.
+made): the WebGL canvas must draw the part in several colours by the page's load event, the exaggeration
+slider, the colour switch and the FE nodes checkbox must change the picture, a click on the part must name one
+of its faces and mark its table row, and nothing may be logged as an error.  Chromium (Debian's ``chromium``)
+and the ``playwright`` package are required: without them the browser tests fail, saying what to install.
 """
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import base64
 import io
 import json
 import re
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +52,7 @@ def monkeypatch_module():
 
 
 def _unpack(entry: dict) -> np.ndarray:
-    return np.frombuffer(zlib.decompress(base64.b64decode(entry["data"])), dtype={
+    return np.frombuffer(base64.b64decode(entry["data"]), dtype={
         "float32": "<f4", "uint16": "<u2", "uint32": "<u4"}[entry["type"]])
 
 
@@ -111,9 +110,12 @@ def test_page_embeds_the_scene_and_three_js_packed(scene, html_path):
     np.testing.assert_array_equal(_unpack(data["hot"]).reshape(-1, 3), scene.hot)
     np.testing.assert_array_equal(_unpack(data["triangles"]).reshape(-1, 3), scene.triangles)
     assert data["triangles"]["type"] == "uint16"                    # fewer than 65 536 vertices
-    assert set(data["library"]) == {"three.core.min.js", "three.module.min.js", "OrbitControls.js"}
-    module = zlib.decompress(base64.b64decode(data["library"]["three.module.min.js"])).decode()
-    assert '"./three.core.min.js"' in module
+    found = re.search(r'<script type="importmap">(.*?)</script>', text, re.S)
+    assert found and text.index('<script type="importmap">') < text.index('<script type="module">')
+    imports = json.loads(found.group(1))["imports"]
+    assert set(imports) == {"three-core", "three", "three-orbit-controls"}
+    module = base64.b64decode(imports["three"].removeprefix("data:text/javascript;base64,")).decode()
+    assert '"./three.core.min.js"' not in module and '"three-core"' in module
     readme = (Path(viewer.__file__).parent / "README.md").read_text(encoding="utf-8")
     assert viewer.THREE_VERSION in readme and "MIT" in readme
     assert (Path(viewer.__file__).parent / "LICENSE.three").read_text().startswith("The MIT License")
@@ -122,7 +124,7 @@ def test_page_embeds_the_scene_and_three_js_packed(scene, html_path):
     assert "<link" not in text.lower()
     rows = re.findall(r'<tr id="face-row-(\d+)" data-face="\1">', text)
     assert [int(r) for r in rows] == [f["index"] for f in scene.faces]
-    assert "tolerance" in text and "deviation [mm]" in text
+    assert "tolerance" in text and "deviation [mm]" in text and "displacement [mm]" in text
 
 
 def test_colour_bar_marks_the_tolerance():
@@ -243,4 +245,36 @@ def test_click_on_the_part_shows_the_face_row(session, blade):
     s.page.click(f"#face-row-{other}")
     assert s.page.get_attribute("#v3-info", "data-face") == str(other)
     assert s.page.locator("tr.picked").count() == 1
+    assert not s.errors, s.errors
+
+
+def test_view_is_drawn_at_load(browser, html_path):
+    """The view draws while the page loads: when the load event has fired it is ready and the canvas shows the
+    part (a print or a headless screenshot taken at load shows it, not "Loading")."""
+    context = browser.new_context(viewport={"width": 1200, "height": 900})
+    try:
+        page = context.new_page()
+        page.goto(html_path.as_uri(), wait_until="load")
+        assert page.get_attribute("#v3-stage", "data-ready") == "true"
+        assert not page.is_visible("#v3-status")
+        rgb = imread(io.BytesIO(page.locator("#v3-canvas").screenshot()), format="png")[..., :3]
+        assert _part_mask(rgb[:, : int(0.8 * rgb.shape[1])]).mean() > 0.02
+    finally:
+        context.close()
+
+
+def test_colour_by_displacement(session, scene):
+    """The view can colour the part by the displacement's length: the picture and the colour bar change, and
+    back; the displacement bar runs from 0 to the largest displacement."""
+    s = session
+    before = s.pixels()
+    assert s.page.is_visible("#v3-bar-deviation") and not s.page.is_visible("#v3-bar-displacement")
+    s.page.select_option("#v3-colour", "displacement")
+    after = s.pixels()
+    assert np.abs(after - before).max(axis=2).__gt__(0.1).mean() > 0.01
+    assert s.page.is_visible("#v3-bar-displacement") and not s.page.is_visible("#v3-bar-deviation")
+    largest = float(np.linalg.norm(scene.displacement, axis=1).max())
+    assert scene.displacement_top == pytest.approx(largest, rel=1e-6)     # the top of the bar: the largest
+    s.page.select_option("#v3-colour", "deviation")
+    assert np.abs(s.pixels() - before).max() < 0.05
     assert not s.errors, s.errors

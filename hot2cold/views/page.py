@@ -280,7 +280,8 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
         view = ["<h2>3D view</h2>", viewer_html(build_scene(result, mesh, exaggeration=scale)),
                 '<p class="muted">The cold part coloured by its deviation from the field (the nodes\' distances '
                 "to it, eq. 21, interpolated over each face from the nodes of the face and its edges; grey: a face "
-                "without nodes), the hot part as a red ghost. Drag to turn, right-drag to pan, wheel to zoom; "
+                "without nodes) or, switched, by the length of its displacement from hot to cold; the hot part as "
+                "a red ghost. Drag to turn, right-drag to pan, wheel to zoom; "
                 "click a face (or a row of the face table) for its figures. The slider exaggerates the "
                 "displacement: vertices at hot + s × (cold − hot).</p>"]
         log.info("3D view built in %.2f s", time.perf_counter() - clock)

@@ -47,6 +47,8 @@ class Scene:
     node_deviation : (k,) float32 array, their errors (mm); NaN for ignored nodes.
     nodes_total : int, the field's nodes in all (``k`` of them are shown).
     scale_top : float, the deviation at the top of the colour scale (mm).
+    displacement_top : float, the displacement magnitude at the top of its colour scale (mm): the largest of
+        the vertices' and the shown nodes'.
     tolerance : float or None, the morph's tolerance (mm).
     exaggeration : float, the slider's starting factor (the report's overlay scale).
     view : (2, 3) float array, the starting view direction (towards the part) and up.
@@ -65,6 +67,7 @@ class Scene:
     node_deviation: np.ndarray
     nodes_total: int
     scale_top: float
+    displacement_top: float
     tolerance: float | None
     exaggeration: float
     view: np.ndarray
@@ -123,6 +126,13 @@ def scale_top(errors: np.ndarray, tolerance: float | None) -> float:
     return top if top > 0.0 else (float(tolerance) if tolerance else 1.0)
 
 
+def displacement_top(*displacements: np.ndarray) -> float:
+    """The top of the displacement colour scale (mm): the largest length of the rows of ``displacements``
+    (``(n, 3)`` arrays), 1 mm where all are zero or none."""
+    top = max((float(np.linalg.norm(d, axis=1).max()) for d in displacements if len(d)), default=0.0)
+    return top if top > 0.0 and np.isfinite(top) else 1.0
+
+
 def ticks(top: float, n: int = 5) -> np.ndarray:
     """Round tick values ``(t,)`` from 0 to ``top`` for the colour bar."""
     values = MaxNLocator(n).tick_values(0.0, top)
@@ -177,6 +187,7 @@ def build_scene(result, mesh: TriangleMesh | None = None, *, max_nodes: int = MA
         node_deviation=errors[shown].astype(np.float32),
         nodes_total=len(first),
         scale_top=scale_top(errors[cls.used], tolerance),
+        displacement_top=displacement_top(cold - hot, np.asarray(result.field.displacements)[shown]),
         tolerance=None if tolerance is None else float(tolerance),
         exaggeration=pictures.displacement_scale(result) if exaggeration is None else float(exaggeration),
         view=_start_view(hot),

@@ -1,15 +1,17 @@
-"""The report's interactive 3D view: an HTML section that needs nothing outside the page.
+"""The report's interactive 3D view: an HTML section that needs nothing outside the page and draws before the
+page's ``load`` event (a print or a headless screenshot taken at load shows it).
 
 :func:`viewer_html` turns a :class:`~hot2cold.views.scene.Scene` into a ``<section>`` holding
 
-* the geometry as JSON of base64 strings, each a zlib-compressed little-endian typed array (float32
-  positions, uint16 or uint32 indices), unpacked in the browser by ``DecompressionStream``;
-* three.js and its OrbitControls (files of this folder, see ``README.md`` here for version and licence),
-  compressed the same way; the page's script unpacks them into ``blob:`` URLs, points the modules' imports
-  at each other and imports them, so the page loads nothing from the network or the disk;
-* ``viewer.js`` (this folder), the page's own script, inline.
+* an import map whose entries are three.js and its OrbitControls (files of this folder, see ``README.md`` here
+  for version and licence) as base64 ``data:`` URLs, their imports of each other named by bare specifiers
+  (:data:`MODULES`): the browser loads the module graph from the page itself, before the page's script runs;
+* the geometry as JSON of base64 strings, each a little-endian typed array (float32 positions, uint16 or uint32
+  indices), decoded synchronously (``atob``);
+* ``viewer.js`` (this folder), the page's own module script, inline: a module script runs before the page's
+  ``DOMContentLoaded`` and ``load`` events, and it draws without awaiting anything.
 
-The colour bar is plain HTML drawn here from matplotlib's viridis, which the script uses for the surface too.
+The colour bars are plain HTML drawn here from matplotlib's viridis, which the script uses for the surface too.
 """
 from __future__ import annotations
 
@@ -18,7 +20,6 @@ import functools
 import html
 import json
 import logging
-import zlib
 from importlib import resources
 
 import numpy as np
@@ -31,10 +32,11 @@ log = logging.getLogger(__name__)
 #: three.js as bundled here (``README.md``).
 THREE_VERSION = "0.185.1"
 
-#: The imports that tie the bundled modules together: (file, specifier as written in it, file it names).
-#: The page's script replaces each specifier by the ``blob:`` URL of the named file.
-LINKS = (("three.module.min.js", '"./three.core.min.js"', "three.core.min.js"),
-         ("OrbitControls.js", "'three'", "three.module.min.js"))
+#: The bundled modules by the bare specifier the page's import map gives each (file, specifier), and the
+#: relative imports of the files rewritten to those specifiers (file, import as written, specifier).
+MODULES = (("three.core.min.js", "three-core"), ("three.module.min.js", "three"),
+           ("OrbitControls.js", "three-orbit-controls"))
+LINKS = (("three.module.min.js", '"./three.core.min.js"', '"three-core"'),)
 
 #: Colour map of the deviation (matplotlib's name) and how many steps the page gets.
 COLOUR_MAP = "viridis"
@@ -57,7 +59,6 @@ STYLE = """
 .v3-bar .tol::before { content: ""; position: absolute; left: -24px; width: 22px; top: 50%;
                        border-top: 2px solid #c62828; }
 .v3-bar .notes { position: absolute; left: 0.4em; right: 0.2em; bottom: 0.3em; line-height: 1.25; }
-.v3-bar .notes .above { color: #c62828; }
 .v3-bar .notes i { display: inline-block; width: 14px; height: 10px; background: #b4b4b4; margin-right: 4px;
                    border: 1px solid #888; vertical-align: middle; }
 .v3-controls { display: flex; flex-wrap: wrap; gap: 0.4em 1.4em; align-items: center; margin: 0.5em 0;
@@ -68,17 +69,20 @@ tr.picked td { background: #ffe08a !important; }
 
 
 @functools.lru_cache(maxsize=1)
-def _library() -> dict[str, str]:
-    """The bundled three.js files, each zlib-compressed and base64-encoded, by file name."""
+def import_map() -> str:
+    """The ``<script type="importmap">`` of the bundled modules: each as a base64 ``data:`` URL under its
+    specifier (:data:`MODULES`), its relative imports rewritten (:data:`LINKS`)."""
     folder = resources.files(__name__)
-    out = {}
-    for name in ("three.core.min.js", "three.module.min.js", "OrbitControls.js"):
+    imports = {}
+    for name, specifier in MODULES:
         text = folder.joinpath(name).read_text(encoding="utf-8")
-        out[name] = base64.b64encode(zlib.compress(text.encode("utf-8"), 9)).decode("ascii")
-        for file, specifier, _ in LINKS:
-            if file == name and specifier not in text:
-                raise RuntimeError(f"the bundled {name} does not import {specifier}: the 3D view cannot link it")
-    return out
+        for file, written, bare in LINKS:
+            if file == name:
+                if written not in text:
+                    raise RuntimeError(f"the bundled {name} does not import {written}: the 3D view cannot link it")
+                text = text.replace(written, bare)
+        imports[specifier] = "data:text/javascript;base64," + base64.b64encode(text.encode("utf-8")).decode("ascii")
+    return f'<script type="importmap">{_json({"imports": imports})}</script>'
 
 
 def _script() -> str:
@@ -89,7 +93,7 @@ def _script() -> str:
 
 
 def _pack(array: np.ndarray, kind: str) -> dict:
-    """A typed array for the page: ``{"type": "float32" | "uint16" | "uint32", "data": base64(zlib(bytes))}``;
+    """A typed array for the page: ``{"type": "float32" | "uint16" | "uint32", "data": base64(bytes)}``;
     ``kind`` "float" or "index" (uint16 when every value fits)."""
     if kind == "float":
         dtype, name = "<f4", "float32"
@@ -98,7 +102,7 @@ def _pack(array: np.ndarray, kind: str) -> dict:
     else:
         dtype, name = "<u4", "uint32"
     raw = np.ascontiguousarray(array, dtype=dtype).tobytes()
-    return {"type": name, "data": base64.b64encode(zlib.compress(raw, 6)).decode("ascii")}
+    return {"type": name, "data": base64.b64encode(raw).decode("ascii")}
 
 
 def _lut() -> np.ndarray:
@@ -115,14 +119,30 @@ def _fmt(x: float) -> str:
     return f"{x:.3g}"
 
 
-def _colour_bar(scene: _scene.Scene) -> str:
-    """The colour bar: viridis from 0 (bottom) to ``scene.scale_top`` (top) in mm, the tolerance marked."""
+def _ramp() -> str:
+    """The colour map as a CSS gradient from the bottom up."""
     lut = _lut()
     stops = ", ".join(f"rgb({r},{g},{b}) {100 * i / 15:.1f}%" for i, (r, g, b) in
                       enumerate(lut[np.linspace(0, _STEPS - 1, 16).astype(int)]))
+    return f"linear-gradient(to top, {stops})"
+
+
+def _displacement_bar(scene: _scene.Scene) -> str:
+    """The colour bar of the displacement magnitude, from 0 to ``scene.displacement_top`` mm (hidden until the
+    view is coloured by it)."""
+    top = scene.displacement_top
+    parts = ['<div class="title">displacement [mm]</div>', f'<div class="ramp" style="background: {_ramp()}">']
+    parts += [f'<span class="tick" style="bottom: {100 * t / top:.2f}%">{_fmt(t)}</span>'
+              for t in _scene.ticks(top)]
+    parts.append('</div><div class="notes"><div>hot to cold, true size</div></div>')
+    return '<div class="v3-bar" id="v3-bar-displacement" hidden>' + "".join(parts) + "</div>"
+
+
+def _colour_bar(scene: _scene.Scene) -> str:
+    """The colour bar: viridis from 0 (bottom) to ``scene.scale_top`` (top) in mm, the tolerance marked."""
     top = scene.scale_top
     parts = ['<div class="title">deviation [mm]</div>',
-             f'<div class="ramp" style="background: linear-gradient(to top, {stops})">']
+             f'<div class="ramp" style="background: {_ramp()}">']
     tol = scene.tolerance
     for t in _scene.ticks(top):
         if tol is None or abs(t - tol) > 0.06 * top:              # no tick label under the tolerance's
@@ -133,12 +153,12 @@ def _colour_bar(scene: _scene.Scene) -> str:
     notes = []
     if tol is None:
         notes.append("<div>no tolerance set</div>")
-    elif tol > top:
-        notes.append(f'<div class="above">tolerance {_fmt(tol)} mm: above the scale</div>')
+    elif tol > top:        # every deviation within the tolerance: a fact, not an alarm (the verdict has the colours)
+        notes.append(f"<div>tolerance {_fmt(tol)} mm, above the scale</div>")
     if not np.isfinite(scene.deviation).all():
         notes.append("<div><i></i>no FE nodes</div>")
     parts.append('<div class="notes">' + "".join(notes) + "</div>")
-    return '<div class="v3-bar">' + "".join(parts) + "</div>"
+    return '<div class="v3-bar" id="v3-bar-deviation">' + "".join(parts) + "</div>"
 
 
 def viewer_html(scene: _scene.Scene) -> str:
@@ -152,9 +172,9 @@ def viewer_html(scene: _scene.Scene) -> str:
         "nodeHot": _pack(s.node_hot, "float"), "nodeDisplacement": _pack(s.node_displacement, "float"),
         "nodeDeviation": _pack(s.node_deviation, "float"),
         "lut": base64.b64encode(_lut().tobytes()).decode("ascii"),
-        "scaleTop": s.scale_top, "tolerance": s.tolerance, "exaggeration": s.exaggeration,
+        "scaleTop": s.scale_top, "displacementTop": s.displacement_top, "tolerance": s.tolerance,
+        "exaggeration": s.exaggeration,
         "view": s.view.tolist(), "origin": s.origin.tolist(), "faces": s.faces,
-        "library": _library(), "links": [list(link) for link in LINKS],
     }
     shown, total = len(s.node_hot), s.nodes_total
     nodes_label = (f"FE nodes ({shown:,} of {total:,}, a random sample)" if shown < total
@@ -164,8 +184,11 @@ def viewer_html(scene: _scene.Scene) -> str:
 <div class="v3-stage" id="v3-stage"><canvas id="v3-canvas" aria-label="3D view of the cold part"></canvas>
 <div class="v3-status" id="v3-status">Loading the 3D view…</div>
 {_colour_bar(s)}
+{_displacement_bar(s)}
 <div class="v3-info" id="v3-info" hidden></div></div>
 <div class="v3-controls">
+<label>colour <select id="v3-colour"><option value="deviation" selected>deviation from the field</option>
+<option value="displacement">displacement (hot to cold)</option></select></label>
 <label>displacement × <input type="range" id="v3-scale" min="0" max="{top:.6g}" step="{top / 1000:.6g}"
  value="{s.exaggeration:.6g}"> <output id="v3-scale-value">{s.exaggeration:.3g}</output></label>
 <button type="button" id="v3-true">true size (× 1)</button>
@@ -175,6 +198,7 @@ def viewer_html(scene: _scene.Scene) -> str:
 <button type="button" id="v3-reset">reset view</button>
 </div>
 <script type="application/json" id="v3-data">{_json(data)}</script>
+{import_map()}
 <script type="module">
 {_script()}
 </script>

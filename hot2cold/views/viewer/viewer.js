@@ -1,8 +1,11 @@
 // hot2cold report: the interactive 3D view (written into the page by hot2cold.views.viewer).
 //
-// Everything it needs is in the page: the JSON element #v3-data holds the geometry (typed arrays,
-// zlib-compressed, base64) and three.js itself (same packing).  three.js is unpacked into blob: URLs whose
-// imports are pointed at each other (data.links), then imported; nothing is fetched.
+// Everything it needs is in the page: the JSON element #v3-data holds the geometry (typed arrays, base64), and
+// the page's import map gives three.js as data: URLs, so the browser loads the modules before this script runs.
+// Nothing here waits: the view is drawn while the module runs, before the page's load event.
+
+import * as THREE from 'three';
+import { OrbitControls } from 'three-orbit-controls';
 
 const data = JSON.parse(document.getElementById('v3-data').textContent);
 const stage = document.getElementById('v3-stage');
@@ -11,41 +14,19 @@ const status = document.getElementById('v3-status');
 const info = document.getElementById('v3-info');
 
 // ------------------------------------------------------------------------------------------ unpacking
-async function inflate(base64) {
-  const packed = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
-  const stream = new Blob([packed]).stream().pipeThrough(new DecompressionStream('deflate'));
-  return new Uint8Array(await new Response(stream).arrayBuffer());
-}
-
 const TYPES = { float32: Float32Array, uint16: Uint16Array, uint32: Uint32Array };
 
-async function array(entry) {
-  const bytes = await inflate(entry.data);
+function array(entry) {
+  const bytes = Uint8Array.from(atob(entry.data), (c) => c.charCodeAt(0));
   return new TYPES[entry.type](bytes.buffer, 0, bytes.byteLength / TYPES[entry.type].BYTES_PER_ELEMENT);
 }
 
-// Each bundled module becomes a blob: URL, its imports of the others (listed before it) replaced by theirs.
-async function loadLibrary() {
-  const urls = {};
-  for (const [name, packed] of Object.entries(data.library)) {
-    let text = new TextDecoder().decode(await inflate(packed));
-    for (const [file, specifier, target] of data.links) {
-      if (file === name) text = text.replaceAll(specifier, JSON.stringify(urls[target]));
-    }
-    urls[name] = URL.createObjectURL(new Blob([text], { type: 'text/javascript' }));
-  }
-  const THREE = await import(urls['three.module.min.js']);
-  const { OrbitControls } = await import(urls['OrbitControls.js']);
-  return { THREE, OrbitControls };
-}
-
 // -------------------------------------------------------------------------------------------- the view
-async function main() {
-  const { THREE, OrbitControls } = await loadLibrary();
+function main() {
   const a = {};
   for (const key of ['hot', 'displacement', 'deviation', 'triangles', 'triangleFace', 'outlines',
                      'nodeHot', 'nodeDisplacement', 'nodeDeviation']) {
-    a[key] = await array(data[key]);
+    a[key] = array(data[key]);
   }
 
   // viridis (sRGB bytes) -> linear colours; NaN (no nodes) grey
@@ -56,11 +37,11 @@ async function main() {
                                       THREE.SRGBColorSpace));
   }
   const grey = new THREE.Color().setRGB(0.71, 0.71, 0.71, THREE.SRGBColorSpace);
-  function colours(values) {
+  function colours(values, top) {
     const out = new Float32Array(values.length * 3);
     values.forEach((v, i) => {
       const c = Number.isNaN(v) ? grey
-        : lut[Math.max(0, Math.min(lut.length - 1, Math.round((v / data.scaleTop) * (lut.length - 1))))];
+        : lut[Math.max(0, Math.min(lut.length - 1, Math.round((v / top) * (lut.length - 1))))];
       out.set([c.r, c.g, c.b], 3 * i);
     });
     return new THREE.BufferAttribute(out, 3);
@@ -82,7 +63,16 @@ async function main() {
   const position = new THREE.BufferAttribute(new Float32Array(a.hot.length), 3);
   const cold = new THREE.BufferGeometry();
   cold.setAttribute('position', position);
-  cold.setAttribute('color', colours(a.deviation));
+  // what the colours show: the deviation from the field (nodes: their errors), or the displacement's length
+  const lengths = (v) => Float32Array.from({ length: v.length / 3 },
+                                           (_, i) => Math.hypot(v[3 * i], v[3 * i + 1], v[3 * i + 2]));
+  const shades = {
+    deviation: { top: data.scaleTop, surface: a.deviation, nodes: a.nodeDeviation },
+    displacement: { top: data.displacementTop, surface: lengths(a.displacement), nodes: lengths(a.nodeDisplacement) },
+  };
+  let shade = shades.deviation;
+  const colourBy = document.getElementById('v3-colour');
+  cold.setAttribute('color', colours(shade.surface, shade.top));
   cold.setIndex(index);
   const coldMesh = new THREE.Mesh(cold, new THREE.MeshLambertMaterial({
     vertexColors: true, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1,
@@ -118,7 +108,7 @@ async function main() {
   const nodePosition = new THREE.BufferAttribute(new Float32Array(a.nodeHot.length), 3);
   const nodes = new THREE.BufferGeometry();
   nodes.setAttribute('position', nodePosition);
-  nodes.setAttribute('color', colours(a.nodeDeviation));
+  nodes.setAttribute('color', colours(shade.nodes, shade.top));
   const nodePoints = new THREE.Points(nodes, new THREE.PointsMaterial({
     size: 3, sizeAttenuation: false, vertexColors: true }));
   nodePoints.frustumCulled = false;
@@ -186,7 +176,7 @@ async function main() {
     const lines = [`face ${f.index}` + (f.name ? ` · ${f.name}` : ''),
                    `${f.nodes.toLocaleString('en')} FE nodes · Δmax ${fmt(f.delta_max)} mm · ` +
                    `Δmean ${fmt(f.delta_mean)} mm`];
-    if (here !== undefined) lines.push(`deviation here ≈ ${fmt(here)} mm`);
+    if (here !== undefined) lines.push(`${colourBy.value} here ≈ ${fmt(here)} mm`);
     info.replaceChildren(...lines.map((text, i) => {
       const line = document.createElement(i === 0 ? 'b' : 'div');
       line.textContent = text;
@@ -219,7 +209,8 @@ async function main() {
     if (!hit) return;
     const { a: i, b: j, c: k } = hit.face;
     triangle.setFromAttributeAndIndices(position, i, j, k).getBarycoord(hit.point, bary);
-    const here = bary.x * a.deviation[i] + bary.y * a.deviation[j] + bary.z * a.deviation[k];
+    const v = shade.surface;
+    const here = bary.x * v[i] + bary.y * v[j] + bary.z * v[k];
     select(a.triangleFace[hit.faceIndex], here);
   });
   document.querySelectorAll('tr[data-face]').forEach((tr) => {
@@ -236,6 +227,15 @@ async function main() {
   });
   document.getElementById('v3-nodes').addEventListener('change', (e) => { nodePoints.visible = e.target.checked; render(); });
   document.getElementById('v3-reset').addEventListener('click', () => { resetView(); render(); });
+  colourBy.addEventListener('change', () => {
+    shade = shades[colourBy.value];
+    cold.setAttribute('color', colours(shade.surface, shade.top));
+    nodes.setAttribute('color', colours(shade.nodes, shade.top));
+    for (const kind of Object.keys(shades)) {
+      document.getElementById(`v3-bar-${kind}`).hidden = kind !== colourBy.value;
+    }
+    render();
+  });
 
   resize();
   resetView();
@@ -244,8 +244,10 @@ async function main() {
   stage.dataset.ready = 'true';
 }
 
-main().catch((error) => {
+try {
+  main();
+} catch (error) {
   status.textContent = `The 3D view could not be shown: ${error.message || error}`;
   stage.dataset.ready = 'failed';
   console.error(error);
-});
+}
