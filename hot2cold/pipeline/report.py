@@ -464,6 +464,13 @@ class Report:
         limit = (self.tolerance or math.inf) + (self.allowance or 0.0)
         return max(refinement.get("delta_max_after", 0.0), refinement.get("between_after", 0.0)) > limit
 
+    def _repr_html_(self) -> str:
+        """How a notebook shows the report: its verdict, figures and face table
+        (:func:`hot2cold.views.notebook.report_html`; the one import of the views from below them)."""
+        from ..views.notebook import report_html
+
+        return report_html(self)
+
     def table(self) -> str:
         """A short text table: the verdict first (:attr:`verdict`), then per face as the paper's Table 1, then
         the overall checks."""

@@ -66,6 +66,14 @@ class MorphResult:
         """cadquery.Shape, the hot part in B-spline form, parameterised as the cold one."""
         return to_cadquery(self.part.kernel.hot)
 
+    def _repr_html_(self) -> str:
+        """How a notebook shows the result: the verdict, the figures, the 3D view of the cold part coloured by
+        its displacement (switchable to the deviation from the field) and the tables
+        (:func:`hot2cold.views.notebook.result_html`; the one import of the views from below them)."""
+        from ..views.notebook import result_html
+
+        return result_html(self)
+
     def write_step(self, path: str | os.PathLike) -> None:
         """Write the cold part to a STEP file (atomically).
 

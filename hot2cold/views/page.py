@@ -256,28 +256,23 @@ def _timings(report) -> str:
     return f'<p class="muted">Morph timings: {cells}.</p>'
 
 
-def render_html(result, scale: float | None = None, *, interactive: bool = True) -> str:
+def render_html(result, scale: float | None = None, *, interactive: bool = True, figures: bool = True,
+                colour: str = "deviation") -> str:
     """The report page of ``result`` (a :class:`~hot2cold.morph.MorphResult`) as a string.
 
     ``scale`` exaggerates the displacement in the overlay picture and starts the 3D view's slider there
     (default :func:`hot2cold.pictures.displacement_scale`: the largest displacement drawn as 5 % of the part's
-    size).  ``interactive`` False leaves the 3D view out (a page without scripts, a few MB smaller).
+    size).  ``interactive`` False leaves the 3D view out (a page without scripts, a few MB smaller); ``figures``
+    False the pictures (drawn by matplotlib, the page's slowest part); ``colour`` is what the 3D view colours
+    first, "deviation" (from the field) or "displacement".
     """
     report = result.report
     scale = pictures.displacement_scale(result) if scale is None else pictures.check_scale(scale)
-    clock = time.perf_counter()
     mesh = pictures.mesh_of(result)
-    overlay = pictures.overlay_png(result, scale, mesh=mesh)
-    error_faces = pictures.error_faces(result)
-    errors = pictures.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
-    curv_faces = pictures.curvature_faces(result, mesh=mesh)
-    curvature = pictures.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
-    numbers = pictures.face_numbers_png(result, mesh=mesh)
-    log.info("pictures drawn in %.2f s", time.perf_counter() - clock)
     view = []
     if interactive:
         clock = time.perf_counter()
-        view = ["<h2>3D view</h2>", viewer_html(build_scene(result, mesh, exaggeration=scale)),
+        view = ["<h2>3D view</h2>", viewer_html(build_scene(result, mesh, exaggeration=scale), colour),
                 '<p class="muted">The cold part coloured by its deviation from the field (the nodes\' distances '
                 "to it, eq. 21, interpolated over each face from the nodes of the face and its edges; grey: a face "
                 "without nodes) or, switched, by the length of its displacement from hot to cold; the hot part as "
@@ -286,6 +281,42 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
                 "displacement: vertices at hot + s × (cold − hot).</p>"]
         log.info("3D view built in %.2f s", time.perf_counter() - clock)
 
+    pictures_part = ["<h2>Pictures</h2>", *_figures(result, scale, mesh)] if figures else []
+    now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    title = f"hot2cold report: {Path(report.hot).name if report.hot else 'morph'}"
+    body = [
+        f"<h1>{_e(title)}</h1>",
+        _verdict(report),
+        f'<p class="muted">hot2cold {_e(__version__)}, {_e(now)}. Method: GT2014-26683 (hot-to-cold '
+        f"B-spline morphing; only control points move).</p>",
+        _summary(report),
+        *view,
+        "<h2>Faces</h2>", _face_table(report),
+        "<h2>Edges</h2>", _edge_table(report),
+        "<h2>Checks</h2>", _checks(report),
+        "<h2>Tolerance and refinement</h2>", _tolerance(report),
+        "<h2>G1 continuity</h2>", _g1(report),
+        *pictures_part,
+        _timings(report),
+    ]
+    return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+            f"<title>{_e(title)}: {_e(report.verdict.state.value)}</title>\n"
+            f"<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
+            "</head>\n<body>\n"
+            + "\n".join(body) + "\n</body>\n</html>\n")
+
+
+def _figures(result, scale: float, mesh) -> list[str]:
+    """The report's pictures (matplotlib, on ``mesh``), each a ``<figure>`` with its caption."""
+    report = result.report
+    clock = time.perf_counter()
+    overlay = pictures.overlay_png(result, scale, mesh=mesh)
+    error_faces = pictures.error_faces(result)
+    errors = pictures.error_maps_png(result, error_faces, mesh=mesh) if error_faces else None
+    curv_faces = pictures.curvature_faces(result, mesh=mesh)
+    curvature = pictures.curvature_png(result, curv_faces, mesh=mesh) if curv_faces else None
+    numbers = pictures.face_numbers_png(result, mesh=mesh)
+    log.info("pictures drawn in %.2f s", time.perf_counter() - clock)
     largest = report.max_displacement
     figures = [
         f'<figure>{_img(numbers, "the faces and their numbers")}<figcaption>Figure 0. The hot part with the '
@@ -317,29 +348,7 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True)
             f"zero, and a panel all below it is titled flat (no change for the difference). A smooth difference "
             f"means the morph added no wiggles."
             f"</figcaption></figure>")
-
-    now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
-    title = f"hot2cold report: {Path(report.hot).name if report.hot else 'morph'}"
-    body = [
-        f"<h1>{_e(title)}</h1>",
-        _verdict(report),
-        f'<p class="muted">hot2cold {_e(__version__)}, {_e(now)}. Method: GT2014-26683 (hot-to-cold '
-        f"B-spline morphing; only control points move).</p>",
-        _summary(report),
-        *view,
-        "<h2>Faces</h2>", _face_table(report),
-        "<h2>Edges</h2>", _edge_table(report),
-        "<h2>Checks</h2>", _checks(report),
-        "<h2>Tolerance and refinement</h2>", _tolerance(report),
-        "<h2>G1 continuity</h2>", _g1(report),
-        "<h2>Pictures</h2>", *figures,
-        _timings(report),
-    ]
-    return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            f"<title>{_e(title)}: {_e(report.verdict.state.value)}</title>\n"
-            f"<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
-            "</head>\n<body>\n"
-            + "\n".join(body) + "\n</body>\n</html>\n")
+    return figures
 
 
 def write_html(result, path: str | os.PathLike, scale: float | None = None, *, interactive: bool = True) -> None:

@@ -127,19 +127,20 @@ def _ramp() -> str:
     return f"linear-gradient(to top, {stops})"
 
 
-def _displacement_bar(scene: _scene.Scene) -> str:
-    """The colour bar of the displacement magnitude, from 0 to ``scene.displacement_top`` mm (hidden until the
-    view is coloured by it)."""
+def _displacement_bar(scene: _scene.Scene, hidden: bool) -> str:
+    """The colour bar of the displacement magnitude, from 0 to ``scene.displacement_top`` mm (``hidden`` while
+    the view is coloured by the deviation)."""
     top = scene.displacement_top
     parts = ['<div class="title">displacement [mm]</div>', f'<div class="ramp" style="background: {_ramp()}">']
     parts += [f'<span class="tick" style="bottom: {100 * t / top:.2f}%">{_fmt(t)}</span>'
               for t in _scene.ticks(top)]
     parts.append('</div><div class="notes"><div>hot to cold, true size</div></div>')
-    return '<div class="v3-bar" id="v3-bar-displacement" hidden>' + "".join(parts) + "</div>"
+    return f'<div class="v3-bar" id="v3-bar-displacement"{" hidden" * hidden}>' + "".join(parts) + "</div>"
 
 
-def _colour_bar(scene: _scene.Scene) -> str:
-    """The colour bar: viridis from 0 (bottom) to ``scene.scale_top`` (top) in mm, the tolerance marked."""
+def _colour_bar(scene: _scene.Scene, hidden: bool = False) -> str:
+    """The colour bar: viridis from 0 (bottom) to ``scene.scale_top`` (top) in mm, the tolerance marked
+    (``hidden`` while the view is coloured by the displacement)."""
     top = scene.scale_top
     parts = ['<div class="title">deviation [mm]</div>',
              f'<div class="ramp" style="background: {_ramp()}">']
@@ -158,11 +159,18 @@ def _colour_bar(scene: _scene.Scene) -> str:
     if not np.isfinite(scene.deviation).all():
         notes.append("<div><i></i>no FE nodes</div>")
     parts.append('<div class="notes">' + "".join(notes) + "</div>")
-    return '<div class="v3-bar" id="v3-bar-deviation">' + "".join(parts) + "</div>"
+    return f'<div class="v3-bar" id="v3-bar-deviation"{" hidden" * hidden}>' + "".join(parts) + "</div>"
 
 
-def viewer_html(scene: _scene.Scene) -> str:
-    """The 3D view's ``<section>`` (canvas, controls, colour bar, data and scripts) for the report page."""
+#: What the 3D view can colour the part by (the first: the default), with the words of its switch.
+COLOURS = {"deviation": "deviation from the field", "displacement": "displacement (hot to cold)"}
+
+
+def viewer_html(scene: _scene.Scene, colour: str = "deviation") -> str:
+    """The 3D view's ``<section>`` (canvas, controls, colour bars, data and scripts) for the report page;
+    ``colour``: what it colours the part by first (a key of :data:`COLOURS`)."""
+    if colour not in COLOURS:
+        raise ValueError(f"colour must be one of {', '.join(COLOURS)}, got {colour!r}")
     s = scene
     data = {
         "hot": _pack(s.hot, "float"), "displacement": _pack(s.displacement, "float"),
@@ -180,15 +188,16 @@ def viewer_html(scene: _scene.Scene) -> str:
     nodes_label = (f"FE nodes ({shown:,} of {total:,}, a random sample)" if shown < total
                    else f"FE nodes ({total:,})")
     top = max(1.0, 4.0 * s.exaggeration)
+    options = "".join(f'<option value="{key}"{" selected" if key == colour else ""}>{words}</option>'
+                      for key, words in COLOURS.items())
     return f"""<section class="v3" id="v3">
 <div class="v3-stage" id="v3-stage"><canvas id="v3-canvas" aria-label="3D view of the cold part"></canvas>
 <div class="v3-status" id="v3-status">Loading the 3D view…</div>
-{_colour_bar(s)}
-{_displacement_bar(s)}
+{_colour_bar(s, hidden=colour != "deviation")}
+{_displacement_bar(s, hidden=colour != "displacement")}
 <div class="v3-info" id="v3-info" hidden></div></div>
 <div class="v3-controls">
-<label>colour <select id="v3-colour"><option value="deviation" selected>deviation from the field</option>
-<option value="displacement">displacement (hot to cold)</option></select></label>
+<label>colour <select id="v3-colour">{options}</select></label>
 <label>displacement × <input type="range" id="v3-scale" min="0" max="{top:.6g}" step="{top / 1000:.6g}"
  value="{s.exaggeration:.6g}"> <output id="v3-scale-value">{s.exaggeration:.3g}</output></label>
 <button type="button" id="v3-true">true size (× 1)</button>

@@ -70,8 +70,8 @@ function main() {
     deviation: { top: data.scaleTop, surface: a.deviation, nodes: a.nodeDeviation },
     displacement: { top: data.displacementTop, surface: lengths(a.displacement), nodes: lengths(a.nodeDisplacement) },
   };
-  let shade = shades.deviation;
   const colourBy = document.getElementById('v3-colour');
+  let shade = shades[colourBy.value];
   cold.setAttribute('color', colours(shade.surface, shade.top));
   cold.setIndex(index);
   const coldMesh = new THREE.Mesh(cold, new THREE.MeshLambertMaterial({
