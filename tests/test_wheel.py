@@ -7,6 +7,7 @@ so that the test downloads nothing; not the environment's editable hot2cold, who
 """
 from __future__ import annotations
 
+import io
 import subprocess
 import sys
 import sysconfig
@@ -31,8 +32,10 @@ def _run(args: list, cwd: Path) -> str:
     return done.stdout
 
 
-@pytest.mark.slow
-def test_the_wheel_installs_and_runs_outside_the_checkout(tmp_path):
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> Path:
+    """The sdist and the wheel built, checked, and the wheel installed in a fresh venv (its folder)."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     dist = tmp_path / "dist"
     _run([sys.executable, "-m", "build", "--sdist", "--wheel", "--outdir", dist, ROOT], tmp_path)
     (wheel,), (sdist,) = list(dist.glob("*.whl")), list(dist.glob("*.tar.gz"))
@@ -52,9 +55,14 @@ def test_the_wheel_installs_and_runs_outside_the_checkout(tmp_path):
     site = Path(_run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], tmp_path).strip())
     (site / "borrowed_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     _run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-index", wheel], tmp_path)
-
     where = Path(_run([python, "-c", "import hot2cold; print(hot2cold.__file__)"], tmp_path).strip())
     assert where.is_relative_to(venv), where
+    return venv
+
+
+@pytest.mark.slow
+def test_the_wheel_runs_the_quick_start_outside_the_checkout(installed, tmp_path):
+    venv = installed
     assert "{morph,batch}" in _run([venv / "bin" / "hot2cold", "--help"], tmp_path)
     assert "FIELD" in _run([venv / "bin" / "hot2cold", "morph", "--help"], tmp_path).upper()
     out = _run([venv / "bin" / "hot2cold", "morph", SAMPLES / "twisted_blade.step",
@@ -63,3 +71,57 @@ def test_the_wheel_installs_and_runs_outside_the_checkout(tmp_path):
     assert out.startswith("tolerance 0.001 mm: met")
     assert (tmp_path / "twisted_blade_cold.step").stat().st_size > 10_000
     assert (tmp_path / "twisted_blade_report.json").is_file()
+
+
+#: Runs a notebook with the interpreter it is run by (its kernel: ipykernel's, of the same interpreter) and
+#: writes it back with its outputs: ``python - NOTEBOOK OUT``.
+_EXECUTE = """
+import sys
+from pathlib import Path
+
+import nbclient
+import nbformat
+
+source, out = map(Path, sys.argv[1:3])
+notebook = nbformat.read(source, as_version=4)
+nbclient.NotebookClient(notebook, kernel_name="python3", timeout=900,
+                        resources={"metadata": {"path": str(source.parent)}}).execute()
+nbformat.write(notebook, out)
+"""
+
+
+@pytest.mark.slow
+def test_the_docs_notebook_from_the_wheel_shows_the_cold_blade_at_load(installed, tmp_path, browser):
+    """The docs' blade notebook, run by the wheel's venv, shows the result: in headless Chromium, at load, the
+    verdict and beside it the 3D view of the cold blade coloured by its displacement."""
+    import nbformat
+    import numpy as np
+    from matplotlib.image import imread
+
+    executed = tmp_path / "blade.ipynb"
+    script = tmp_path / "execute.py"
+    script.write_text(_EXECUTE)
+    _run([installed / "bin" / "python", script, ROOT / "docs" / "examples" / "blade.ipynb", executed], tmp_path)
+    notebook = nbformat.read(executed, as_version=4)
+    shown = [o["data"]["text/html"] for cell in notebook.cells if cell.cell_type == "code"
+             for o in cell.get("outputs", []) if o.get("output_type") == "execute_result"
+             and "text/html" in o.get("data", {}) and "<iframe" in o["data"]["text/html"]]
+    assert len(shown) == 1, "the notebook shows its result once"
+    context = browser.new_context(viewport={"width": 1200, "height": 1100})
+    try:
+        page = context.new_page()
+        page.set_content(f"<!DOCTYPE html><html><body>{shown[0]}</body></html>", wait_until="load")
+        frame = page.frames[1]
+        assert frame.get_attribute("#v3-stage", "data-ready") == "true"
+        assert frame.input_value("#v3-colour") == "displacement"
+        assert frame.text_content("#verdict").startswith("tolerance 0.001 mm: met")
+        assert frame.is_visible("#verdict") and frame.is_visible("#v3-canvas")
+        shot = tmp_path / "notebook.png"
+        page.screenshot(path=str(shot), full_page=False)
+        rgb = imread(io.BytesIO(frame.locator("#v3-canvas").screenshot()), format="png")[..., :3]
+        drawn = rgb[:, : int(0.8 * rgb.shape[1])]
+        coloured = (drawn.max(axis=2) - drawn.min(axis=2) > 0.15) & (
+            np.maximum(drawn[..., 1], drawn[..., 2]) > drawn[..., 0])
+        assert coloured.mean() > 0.02 and shot.stat().st_size > 10_000
+    finally:
+        context.close()
