@@ -419,3 +419,79 @@ def test_bad_bdf(tmp_path, text, words):
     path = tmp_path / "bad.bdf"
     path.write_text(text)
     one_line_error(lambda: read_bdf_grids(path), "bad.bdf", *words)
+
+
+# --------------------------------------------------------------------------------------------------------
+# Points without position, heat transfer tables, grids on a system's axis (issue 39: pyNastran's models/)
+# --------------------------------------------------------------------------------------------------------
+def _data_rows(raw: bytes, ident: int) -> tuple[int, int]:
+    """Byte offset and row count of the data record after the IDENT whose payload starts at ``ident``."""
+    at = ident + 584 + 4
+    for _ in range(4):            # the markers -k, 1, 0 and n (n words of data follow)
+        (length,) = struct.unpack_from("<i", raw, at)
+        (value,) = struct.unpack_from("<i", raw, at + 4)
+        at += length + 8
+    return at + 4, value // 8
+
+
+def _with_point_kind(tmp_path, rows: slice, kind: int) -> tuple[Path, int]:
+    raw = bytearray((CORPUS / "solid_bending.op2").read_bytes())
+    idents = [i for i in _ident_positions(bytes(raw)) if struct.unpack_from("<i", raw, i + 4)[0] == 1]
+    start, count = _data_rows(bytes(raw), idents[-1])
+    picked = range(count)[rows]
+    for r in picked:
+        struct.pack_into("<i", raw, start + 32 * r + 4, kind)
+    path = tmp_path / "points.op2"
+    path.write_bytes(bytes(raw))
+    return path, len(picked)
+
+
+@pytest.mark.parametrize("kind,name", [(2, "scalar point(s)"), (3, "extra point(s)")])
+def test_scalar_and_extra_points_are_left_out_and_said(tmp_path, caplog, kind, name):
+    full = read_op2(CORPUS / "solid_bending.op2")
+    path, n = _with_point_kind(tmp_path, slice(0, 3), kind)
+    with caplog.at_level("INFO", logger="hot2cold.io.nastran"):
+        result = read_op2(path)
+    np.testing.assert_array_equal(result.node_ids, full.node_ids[n:])
+    said = [r for r in caplog.records if r.levelname == "WARNING"]
+    assert [r.getMessage() for r in said] == [f"{path}: 3 {name} of subcase 1 left out (no position)"]
+
+
+def test_a_set_of_scalar_points_only_is_refused(tmp_path):
+    path, n = _with_point_kind(tmp_path, slice(None), 2)
+    one_line_error(lambda: read_op2(path), "points.op2: subcase 1 holds the displacements of",
+                   f"{n} scalar point(s) only, no GRID")
+
+
+def test_punch_scalar_points_are_left_out_and_said(tmp_path, caplog):
+    lines = (CORPUS / "cbush.pch").read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.split()[1:2] == ["G"])
+    lines[k] = lines[k].replace(" G ", " S ", 1)
+    path = tmp_path / "spoint.pch"
+    path.write_text("\n".join(lines) + "\n")
+    with caplog.at_level("INFO", logger="hot2cold.io.nastran"):
+        result = read_punch(path)
+    assert len(result.node_ids) == 1
+    assert f"{path}: 1 scalar point(s) of subcase 1 left out (no position)" in caplog.messages
+
+
+def test_heat_transfer_tables_are_not_displacements(tmp_path):
+    raw = bytearray((CORPUS / "ctetra.op2").read_bytes())
+    idents = [i for i in _ident_positions(bytes(raw)) if struct.unpack_from("<i", raw, i + 4)[0] == 1]
+    for i in idents:
+        struct.pack_into("<i", raw, i + 4 * 22, 1)      # IDENT word 23: thermal flag
+    path = tmp_path / "thermal.op2"
+    path.write_bytes(bytes(raw))
+    one_line_error(lambda: read_op2(path), "thermal.op2 holds no static real SORT1 displacements",
+                   "temperatures in OUGV1")
+
+
+@pytest.mark.parametrize("kind", ["C", "S"])
+def test_grid_on_the_axis_of_a_cylindrical_or_spherical_system(kind):
+    from hot2cold.io.nastran import _local_axes
+
+    noisy = np.array([[1e-16, -3e-17, 3.0], [0.0, 0.0, 3.0]])    # r = 0 but for rounding of the position
+    axes = _local_axes(kind, noisy)
+    np.testing.assert_allclose(axes[0], axes[1], atol=1e-12)
+    # phi = 0: e_theta is the system's y axis (C); e_theta at theta = 0 is its x axis (S)
+    np.testing.assert_allclose(axes[1][:, 1], [0, 1, 0] if kind == "C" else [1, 0, 0], atol=1e-12)

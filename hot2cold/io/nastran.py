@@ -23,7 +23,10 @@ words) + data.  IDENT words (1-based, MSC DMAP "OUG" datablock): 1 ``approach_co
 float32), 9 format code (1 real), 10 ``num_wide``, 51-82 title, 83-114 subtitle, 115-146 label (ASCII).
 Taken: table code 1 (displacement), sort code 0 (real, SORT1), format 1, ``num_wide`` 8, approach code 1
 (statics) or 10 (nonlinear statics).  A data row is 8 words ``10*grid_id + device_code, point type
-(1 grid, 2 scalar, ...), T1, T2, T3 (float32), R1, R2, R3``; only the grid points' T1-T3 are kept.
+(1 grid, 2 scalar, ...), T1, T2, T3 (float32), R1, R2, R3``; only the grid points' T1-T3 are kept: the
+scalar, extra and other points, which have no position, are left out with a warning naming their count and
+kind (a set of such points only is refused).  Heat transfer tables (IDENT word 23, thermal flag, 1) hold
+temperatures and are skipped.
 
 *Result sets*: one per IDENT of such a table, named ``"subcase <id>"`` (with ``" load <factor>"`` for
 nonlinear statics; with ``" (<table>)"`` when another table already gave that name).  ``field_name``
@@ -46,7 +49,8 @@ Punch (:func:`read_punch`)
 80-column text; each result block starts with ``$TITLE``, ``$SUBTITLE``, ``$LABEL`` lines, then the
 result kind (``$DISPLACEMENTS``), the format (``$REAL OUTPUT``), ``$SUBCASE ID = n`` and, for other than
 static results, a ``$TIME`` / ``$FREQUENCY`` / ``$EIGENVALUE`` line.  Each grid takes two lines:
-``id  G  T1  T2  T3`` and ``-CONT-  R1  R2  R3`` (columns 73-80 hold a line number).  Static real
+``id  G  T1  T2  T3`` and ``-CONT-  R1  R2  R3`` (columns 73-80 hold a line number); scalar (``S``) and
+extra (``E``) points are left out with a warning, as in the OP2.  Static real
 displacement blocks are result sets named ``"subcase <id>"``, selected as for the OP2.  The punch holds no
 positions, and its displacements are in the grids' CD systems: use :func:`read_bdf_grids`.
 
@@ -107,6 +111,7 @@ class _Set:
     ids: np.ndarray        # (N,) int64
     values: np.ndarray     # (N, 3) float64
     basic: bool = False    # displacements already in the basic frame (B... tables)
+    left_out: str = ""     # the points of the table left out ("3 scalar points"), for a log line
 
 
 def _pick(sets: list[_Set], path: str, field_name: str | None, step: int | None) -> _Set:
@@ -133,7 +138,12 @@ def _pick(sets: list[_Set], path: str, field_name: str | None, step: int | None)
 
 def _result(sets: list[_Set], path: str, field_name, step) -> tuple[_Set, tuple[str, ...]]:
     chosen = _pick(sets, path, field_name, step)
+    if chosen.left_out and not len(chosen.ids):
+        raise FieldError(f"{path}: {chosen.name} holds the displacements of {chosen.left_out} only, no GRID; "
+                         f"those points have no position: request the displacements of the grids")
     log.info("%s: took %s (%d grids) of %d result set(s)", path, chosen.name, len(chosen.ids), len(sets))
+    if chosen.left_out:
+        log.warning("%s: %s of %s left out (no position)", path, chosen.left_out, chosen.name)
     return chosen, tuple(s.name for s in sets)
 
 
@@ -162,6 +172,8 @@ _OTHER_SIZES = {1701: 24, 1801: 24, 1901: 24, 14301: 16}    # bytes per entry
 _END_OF_RECORDS = (65535, 65535, 65535)
 # One data row of a real SORT1 displacement table (num_wide 8).
 _OUG_ROW = np.dtype([("device", "<i4"), ("kind", "<i4"), ("t", "<f4", 3), ("r", "<f4", 3)])
+# OUG point types other than 1 (GRID); none has a position, so their rows are left out (and said).
+_POINT_KINDS = {2: "scalar point(s)", 3: "extra point(s)", 4: "modal point(s)", 7: "ring/fluid point(s)"}
 _OTHER_RESULTS = {7: "eigenvectors", 10: "velocities", 11: "accelerations"}   # OUG table codes
 _APPROACH = {1: "statics", 2: "real eigenvalues", 3: "differential stiffness", 5: "frequency",
              6: "transient", 7: "pre-buckling", 8: "post-buckling", 9: "complex eigenvalues",
@@ -316,7 +328,8 @@ def _ident(rec: bytes) -> dict | None:
         return None
     w = np.frombuffer(rec, "<i4")
     return {"approach": int(w[0]) // 10, "table_code": int(w[1]) % 1000, "sort_code": int(w[1]) // 1000,
-            "subcase": int(w[3]), "word5": rec[16:20], "format": int(w[8]), "num_wide": int(w[9])}
+            "subcase": int(w[3]), "word5": rec[16:20], "format": int(w[8]), "num_wide": int(w[9]),
+            "thermal": int(w[22])}
 
 
 def _displacement_sets(name: str, records: list[bytes], path: str, skipped: list[str]) -> list[_Set]:
@@ -329,6 +342,9 @@ def _displacement_sets(name: str, records: list[bytes], path: str, skipped: list
             continue                 # not displacements (eigenvectors are table code 7, velocities 10 ...)
         approach = ident["approach"]
         what = f"{_APPROACH.get(approach, f'approach code {approach}')} displacements in {name}"
+        if ident["thermal"] == 1:    # heat transfer: the table holds temperatures, not displacements
+            skipped.append(f"temperatures in {name}")
+            continue
         if approach not in (1, 10):
             skipped.append(what)
             continue
@@ -340,13 +356,14 @@ def _displacement_sets(name: str, records: list[bytes], path: str, skipped: list
                              f"{len(data)} bytes, not a whole number of rows; write the OP2 again")
         rows = np.frombuffer(data, _OUG_ROW)
         grid = rows["kind"] == 1     # point type 1 = GRID; scalar and extra points have no position
-        if not grid.all():
-            log.info("%s: %s: left out %d scalar/extra point(s)", path, name, int((~grid).sum()))
         label = f"subcase {ident['subcase']}"
         if approach == 10:
             label += f" load {struct.unpack('<f', ident['word5'])[0]:g}"
+        kinds, counts = np.unique(rows["kind"][~grid], return_counts=True)
+        left_out = ", ".join(f"{int(c)} {_POINT_KINDS.get(int(k), f'point(s) of type {int(k)}')}"
+                             for k, c in zip(kinds, counts))
         sets.append(_Set(label, ident["subcase"], (rows["device"][grid] // 10).astype(np.int64),
-                         rows["t"][grid].astype(np.float64), basic=name.startswith("B")))
+                         rows["t"][grid].astype(np.float64), basic=name.startswith("B"), left_out=left_out))
     return sets
 
 
@@ -448,7 +465,11 @@ def _local_axes(kind: str, local: np.ndarray) -> np.ndarray:
     if kind == "R":
         return np.broadcast_to(np.eye(3), (m, 3, 3))
     x, y, z = local.T
-    phi = np.arctan2(y, x)
+    # A grid on the system's axis (r = 0, to rounding of its position) has no direction of its own: take the
+    # axes at theta (phi) = 0, the system's x axis, not an angle of the rounding noise of its local x, y.
+    scale = np.maximum(np.abs(local).max(axis=1), 1.0)
+    on_axis = np.hypot(x, y) <= 1e-9 * scale
+    phi = np.where(on_axis, 0.0, np.arctan2(y, x))
     cp, sp, zero, one = np.cos(phi), np.sin(phi), np.zeros(m), np.ones(m)
     if kind == "C":           # e_r, e_theta, e_z
         return np.stack([np.column_stack([cp, sp, zero]), np.column_stack([-sp, cp, zero]),
@@ -601,9 +622,13 @@ def _punch_blocks(lines: list[str], path: str) -> list[_PunchBlock]:
     return blocks
 
 
-def _punch_displacements(block: _PunchBlock, path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Grid ids (N,) and T1-T3 (N, 3) of a real displacement block (rows ``id G T1 T2 T3`` + ``-CONT-``)."""
-    ids, values = [], []
+_PUNCH_POINT_KINDS = {"S": "scalar point(s)", "E": "extra point(s)", "M": "modal point(s)"}
+
+
+def _punch_displacements(block: _PunchBlock, path: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """Grid ids (N,) and T1-T3 (N, 3) of a real displacement block (rows ``id G T1 T2 T3`` + ``-CONT-``), and
+    the points left out ("3 scalar point(s)")."""
+    ids, values, others = [], [], {}
     for number, line in block.rows:
         fields = line.split()
         if fields[0] == "-CONT-":
@@ -611,15 +636,17 @@ def _punch_displacements(block: _PunchBlock, path: str) -> tuple[np.ndarray, np.
         if len(fields) != 5 or not fields[0].isdigit():
             raise FieldError(f"{path} line {number}: expected 'grid-id type T1 T2 T3', got {line.strip()!r}; "
                              f"pass a punch file of real SORT1 displacements")
-        if fields[1] != "G":
-            continue                 # scalar (S) and extra (E) points have no position
+        if fields[1] != "G":         # scalar (S) and extra (E) points have no position
+            others[fields[1]] = others.get(fields[1], 0) + 1
+            continue
         try:
             values.append([float(v) for v in fields[2:]])
         except ValueError:
             raise FieldError(f"{path} line {number}: unreadable number in {line.strip()!r}; "
                              f"write the punch file again") from None
         ids.append(int(fields[0]))
-    return np.array(ids, dtype=np.int64), np.array(values, dtype=np.float64).reshape(-1, 3)
+    left_out = ", ".join(f"{n} {_PUNCH_POINT_KINDS.get(k, f'point(s) of type {k}')}" for k, n in others.items())
+    return np.array(ids, dtype=np.int64), np.array(values, dtype=np.float64).reshape(-1, 3), left_out
 
 
 def read_punch(path: str, field_name: str | None = None, step: int | None = None) -> NastranResult:
@@ -645,9 +672,9 @@ def read_punch(path: str, field_name: str | None = None, step: int | None = None
             skipped.append(f"{b.output.lower() or 'unlabelled'} {'static' if b.static else 'non-static'} "
                            f"displacements")
             continue
-        ids, values = _punch_displacements(b, path)
-        if len(ids):
-            sets.append(_Set(f"subcase {b.subcase}", b.subcase, ids, values))
+        ids, values, left_out = _punch_displacements(b, path)
+        if len(ids) or left_out:
+            sets.append(_Set(f"subcase {b.subcase}", b.subcase, ids, values, left_out=left_out))
     if not sets:
         what = f"; it holds {', '.join(dict.fromkeys(skipped))}" if skipped else ""
         raise FieldError(f"{path} holds no static real displacements ($DISPLACEMENTS, $REAL OUTPUT){what}; "
@@ -665,6 +692,7 @@ def _merge_repeated_subcases(sets: list[_Set]) -> None:
         if sets[i].name == sets[i - 1].name:
             a, b = sets[i - 1], sets.pop(i)
             a.ids, a.values = np.concatenate([a.ids, b.ids]), np.concatenate([a.values, b.values])
+            a.left_out = ", ".join(x for x in (a.left_out, b.left_out) if x)
         else:
             i += 1
 
