@@ -134,9 +134,9 @@ def test_page_is_self_contained_with_four_valid_pngs(page):
     """The face numbers (issue 17), the overlay, the error maps and the curvature maps."""
     _, text, _, _ = page
     assert "<link" not in text.lower()
-    # the only scripts are the 3D view's, inline: its data and its module (three.js packed inside)
+    # the only scripts are the 3D view's, inline: its data, the import map of three.js (data: URLs) and its module
     assert re.findall(r"<script\b[^>]*>", text, re.I) == ['<script type="application/json" id="v3-data">',
-                                                         '<script type="module">']
+                                                         '<script type="importmap">', '<script type="module">']
     assert not re.search(r"""(src|href)\s*=\s*["'](?!data:image/png;base64,)""", text)
     images = _parse(text).images
     assert len(images) == 4

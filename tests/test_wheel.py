@@ -8,6 +8,7 @@ so that the test downloads nothing; not the environment's editable hot2cold, who
 from __future__ import annotations
 
 import io
+import os
 import subprocess
 import sys
 import sysconfig
@@ -27,7 +28,10 @@ PACKAGE_DATA = ("hot2cold/views/viewer/three.core.min.js", "hot2cold/views/viewe
 
 
 def _run(args: list, cwd: Path) -> str:
-    done = subprocess.run([str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=900)
+    """``args`` run in ``cwd`` as a fresh shell would run them: without this process's PYTHONPATH or
+    PYTHONHOME, which would put a checkout's hot2cold before the installed one."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    done = subprocess.run([str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=900, env=env)
     assert done.returncode == 0, f"{' '.join(map(str, args))} exited {done.returncode}:\n{done.stderr[-3000:]}"
     return done.stdout
 
