@@ -45,10 +45,6 @@ TABLES = {
     "g1": None,                       # g1_table(): four parts and fields, with and without G1
 }
 
-# A table's place is a block of ``doc_blocks.py`` (its markers, indented as the text around them, a table inside a
-# list item, and between them the table, indented the same).
-
-
 #: Distances [mm] and angles [°] below these are round-off, not results: the tables say "< 1e-09" for them.
 ROUNDOFF_MM = 1e-9
 ROUNDOFF_DEG = 1e-6

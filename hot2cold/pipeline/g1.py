@@ -26,6 +26,7 @@ are :class:`hot2cold.core.model.Side` (u0, u1, v0, v1); indices number from 0 an
 """
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -898,11 +899,16 @@ class _Corners:
     strain: float
     constraints: dict = field(default_factory=dict)
 
+    @functools.cached_property
+    def hot_curves(self) -> list[BSplineCurve | None]:
+        """The hot part's edge curves, once for every cluster."""
+        return [e.curve for e in self.part.edges]
+
     def plan(self, v: int, faces: list[int]) -> _Corner:
         """The cluster ``faces`` at vertex ``v``: its angles and, where the morph kinked it, the conditions that
         turn the edges bounding its faces into one common plane (kept in :attr:`constraints`)."""
         part, curves = self.part, self.curves
-        hot_n = _corner_normals(part, faces, v, [e.curve for e in part.edges])
+        hot_n = _corner_normals(part, faces, v, self.hot_curves)
         fixed_n = {k: self.anchors[(v, k)] for k in faces if (v, k) in self.anchors}
         cold_n = _cluster_normals(part, faces, v, curves, fixed_n, self.decided)
         for k, n in fixed_n.items():                  # hot normal of an anchored face, for orientation
