@@ -38,9 +38,10 @@ def unapply_trsf(points: np.ndarray, trsf: gp_Trsf | None) -> np.ndarray:
     return np.linalg.solve(a, (points - b).reshape(-1, 3).T).T.reshape(points.shape)
 
 
-def _flat_knots(knots: TColStd_Array1OfReal, mults: TColStd_Array1OfInteger) -> np.ndarray:
-    return np.repeat([knots.Value(i) for i in range(knots.Lower(), knots.Upper() + 1)],
-                     [mults.Value(i) for i in range(mults.Lower(), mults.Upper() + 1)])
+def _flat_knots(n: int, knot, multiplicity) -> np.ndarray:
+    """The full knot vector from the ``n`` distinct knots ``knot(i)`` and their ``multiplicity(i)`` (1-based: the
+    kernel's accessors, which every OCP build has, where its arrays' ``Value`` is missing from some)."""
+    return np.repeat([knot(i) for i in range(1, n + 1)], [multiplicity(i) for i in range(1, n + 1)])
 
 
 def _distinct_knots(flat: np.ndarray) -> tuple[TColStd_Array1OfReal, TColStd_Array1OfInteger]:
@@ -65,12 +66,9 @@ def curve_to_record(curve: Geom_BSplineCurve, trsf: gp_Trsf | None = None) -> BS
         raise KernelError("periodic curves must be made non-periodic before conversion")
     n = curve.NbPoles()
     poles = np.array([[curve.Pole(i).X(), curve.Pole(i).Y(), curve.Pole(i).Z()] for i in range(1, n + 1)])
-    kn = TColStd_Array1OfReal(1, curve.NbKnots())
-    mu = TColStd_Array1OfInteger(1, curve.NbKnots())
-    curve.Knots(kn)
-    curve.Multiplicities(mu)
     weights = np.array([curve.Weight(i) for i in range(1, n + 1)]) if curve.IsRational() else None
-    return BSplineCurve(apply_trsf(poles, trsf), _flat_knots(kn, mu), curve.Degree(), weights)
+    knots = _flat_knots(curve.NbKnots(), curve.Knot, curve.Multiplicity)
+    return BSplineCurve(apply_trsf(poles, trsf), knots, curve.Degree(), weights)
 
 
 def surface_to_record(surface: Geom_BSplineSurface, trsf: gp_Trsf | None = None) -> BSplineSurface:
@@ -86,16 +84,10 @@ def surface_to_record(surface: Geom_BSplineSurface, trsf: gp_Trsf | None = None)
             poles[i, j] = p.X(), p.Y(), p.Z()
             weights[i, j] = surface.Weight(i + 1, j + 1)
     rational = surface.IsURational() or surface.IsVRational()
-    uk = TColStd_Array1OfReal(1, surface.NbUKnots())
-    um = TColStd_Array1OfInteger(1, surface.NbUKnots())
-    vk = TColStd_Array1OfReal(1, surface.NbVKnots())
-    vm = TColStd_Array1OfInteger(1, surface.NbVKnots())
-    surface.UKnots(uk)
-    surface.UMultiplicities(um)
-    surface.VKnots(vk)
-    surface.VMultiplicities(vm)
-    return BSplineSurface(apply_trsf(poles, trsf), _flat_knots(uk, um), _flat_knots(vk, vm),
-                          surface.UDegree(), surface.VDegree(), weights if rational else None)
+    u_knots = _flat_knots(surface.NbUKnots(), surface.UKnot, surface.UMultiplicity)
+    v_knots = _flat_knots(surface.NbVKnots(), surface.VKnot, surface.VMultiplicity)
+    return BSplineSurface(apply_trsf(poles, trsf), u_knots, v_knots, surface.UDegree(), surface.VDegree(),
+                          weights if rational else None)
 
 
 def record_to_curve(rec: BSplineCurve, trsf: gp_Trsf | None = None) -> Geom_BSplineCurve:

@@ -405,9 +405,9 @@ def read_step_styles(path: str | os.PathLike) -> tuple[TopoDS_Shape, Styles]:
     reader = STEPCAFControl_Reader()              # creating it sets up the statics changed below
     reader.SetNameMode(True)
     reader.SetColorMode(True)
-    for off in (reader.SetLayerMode, reader.SetPropsMode, reader.SetGDTMode, reader.SetMatMode,
-                reader.SetViewMode, reader.SetMetaMode):
-        off(False)
+    for mode in ("SetLayerMode", "SetPropsMode", "SetGDTMode", "SetMatMode", "SetViewMode", "SetMetaMode"):
+        if hasattr(reader, mode):                 # the metadata mode came with OCCT 7.9
+            getattr(reader, mode)(False)
     document = _new_document()
     with _Statics(read__stepcaf__subshapes__name=1):
         shape = read_through(reader, path, lambda: reader.Transfer(document) and reader.Reader().NbShapes() > 0,

@@ -30,6 +30,7 @@ from ..core.model import Classification, Part, Role
 from ..io.field import DisplacementField, as_field
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel, rebuild
+from ..kernel.shapes import shape_type
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.validity import check_solids
 from ..settings import Settings
@@ -109,7 +110,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
 
     Parameters
     ----------
-    hot : a STEP path, a CadQuery Shape/Workplane/Assembly or a ``TopoDS_Shape``; its solids are morphed.
+    hot : a STEP path, a CadQuery Shape/Workplane/Assembly, a build123d Solid/Part/Compound/BuildPart or a
+        ``TopoDS_Shape``; its solids are morphed (``result.cold`` comes back in build123d's class for its objects).
     field : a field file path, a :class:`~hot2cold.io.field.DisplacementField`, or a pair
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
     settings : tolerances (default :class:`Settings()`).  With ``settings.blas_threads`` set, the BLAS
@@ -452,4 +454,4 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     cold = _rebuild_and_check(context, fits, classified, hot_checks, grids, stages)
     about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
              "inversion": None if inversion is None else asdict(inversion)}
-    return _result(context, classified, fits, cold, stages, about)
+    return replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))

@@ -13,7 +13,7 @@ from ..core.model import Classification, Part
 from ..errors import MorphError
 from ..io.field import DisplacementField
 from ..kernel.rebuild import ColdKernel
-from ..kernel.shapes import to_cadquery
+from ..kernel.shapes import ShapeType, to_user_shape
 from ..kernel.step import write_step
 from ..kernel.topology import solid_fault
 from .edge_fit import EdgeMorph
@@ -41,9 +41,11 @@ class MorphResult:
     problems : tuple of str, what the checks after the sew found wrong with the cold part (a face folded
         over, a solid turned inside out or crossing itself; such solids are reported invalid), one line each;
         :func:`check_result` raises on them.
+    shape_type : ShapeType, the library (and class) ``cold`` and ``hot`` come back in: the hot part's when
+        it was a build123d object, else CadQuery's.
 
-    ``cold`` and ``hot`` are the parts as CadQuery shapes, made when first asked for (CadQuery and VTK are
-    slow to import, and a morph on the command line does not need them).
+    ``cold`` and ``hot`` are the parts as CadQuery (or build123d) shapes, made when first asked for (CadQuery
+    and VTK are slow to import, and a morph on the command line does not need them).
     """
 
     report: Report
@@ -55,16 +57,18 @@ class MorphResult:
     node_errors: np.ndarray
     cold_kernel: ColdKernel
     problems: tuple[str, ...] = ()
+    shape_type: ShapeType = ShapeType()
 
     @cached_property
     def cold(self):
-        """cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one."""
-        return to_cadquery(self.cold_kernel.shape)
+        """cadquery.Shape, the cold part (a Solid, or a Compound of solids), same topology as the hot one; a
+        build123d ``Solid``, ``Part`` or ``Compound`` (the hot part's class) when the hot part was one."""
+        return to_user_shape(self.cold_kernel.shape, self.shape_type)
 
     @cached_property
     def hot(self):
-        """cadquery.Shape, the hot part in B-spline form, parameterised as the cold one."""
-        return to_cadquery(self.part.kernel.hot)
+        """The hot part in B-spline form, parameterised as the cold one, in the library of ``cold``."""
+        return to_user_shape(self.part.kernel.hot, self.shape_type)
 
     def _repr_html_(self) -> str:
         """How a notebook shows the result: the verdict, the figures, the 3D view of the cold part coloured by
