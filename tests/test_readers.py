@@ -136,6 +136,9 @@ def test_frd_last_block_by_default_and_step_choice(tmp_path):
     r = read_frd(path, step=0)
     assert (r.name, r.components, r.step, r.index, r.count) == ("DISP", ("D1", "D2", "D3"), 1, 0, 2)
     assert r.value == 1.0
+    # the set taken is named as CGX lists it: its place among the DISP blocks, the header's step and time
+    assert read_field(path).result_set == "DISP block 2 of 2: step 2, time 2"
+    assert read_field(path, step=0).result_set == "DISP block 1 of 2: step 1, time 1"
     frd = FrdFile.read(path)
     assert frd.datasets() == ["DISP", "STRESS", "DISP"]
     assert frd.count("disp") == 2
@@ -152,6 +155,7 @@ def test_frd_of_a_hot2cold_deck_is_the_difference_of_its_steps(tmp_path):
     assert frd.is_hot_to_cold() and frd.heading.startswith("hot2cold hot-to-cold")
     np.testing.assert_array_equal(read_field(path).displacements, rounded(U2) - rounded(U1))
     np.testing.assert_array_equal(frd.hot_to_cold().values, rounded(U2) - rounded(U1))
+    assert read_field(path).result_set == "DISP block 2 of 2: step 2, time 2, minus block 1 (step 1, time 1)"
     np.testing.assert_array_equal(read_field(path, step=-1).displacements, rounded(U2))  # raw blocks on request
     one = write(tmp_path, frd_text(disp(U2, 1), heading="hot2cold hot-to-cold"), "one.frd")
     np.testing.assert_array_equal(read_field(one).displacements, rounded(U2))

@@ -68,6 +68,10 @@ def test_morph_from_solver_results(solved):
     corners = _block_of(field, folder / "again.step")
     report = json.loads((folder / "report.json").read_text())
     assert report["valid"] and report["delta_max"] <= 1e-3
+    # the report names the result set taken as the solver's post-processor does (here each file's last)
+    named = r"result set 0 \(load step 1, substep 1, time 1\)" if path.suffix == ".rst" else r"subcase 1"
+    assert re.fullmatch(named, report["result_set"]), report["result_set"]
+    assert report["result_set"] in (folder / "report.html").read_text()
     checks = check_solids(read_step(folder / "cold.step"))
     assert len(checks) == 1 and checks[0].valid and checks[0].closed and checks[0].faces == 6
     # each corner node's displacement moved the block's corner with it (the solver's nodes there)

@@ -355,7 +355,7 @@ def read_hot_to_cold(frd_path, points_from=None) -> DisplacementField:
     points = result.points if points_from is None else match_points(points_from, result.node_ids,
                                                                     result.points, frd.path)
     return DisplacementField(points, result.values, result.node_ids, source=frd.path,
-                             triangles=result.triangles)
+                             triangles=result.triangles, result_set=result.label)
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -66,7 +66,7 @@ import itertools
 import logging
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -121,6 +121,12 @@ class DisplacementField:
         midside nodes of the edges 0-1, 1-2, 2-0; :mod:`hot2cold.core.elements`) when the source brings its
         elements, else ``None``.  The morph samples the field inside them by their own shape functions.
         Read-only.
+    result_set : str
+        Which of a solver file's result sets the field is, as the solver's post-processor names it (a
+        CalculiX ``"DISP block 2 of 3: step 2, time 1"``, an ANSYS ``"result set 2 (load step 1, substep 3,
+        time 2.5)"``, a Nastran ``"subcase 2"``), for the report; ``""`` for other sources.
+
+    Copies that change some arrays are made with :func:`dataclasses.replace`, which keeps the rest.
 
     The constructor copies the arrays and checks shapes, N >= 1 and finiteness; a violation raises
     :class:`~hot2cold.errors.FieldError`.
@@ -131,6 +137,7 @@ class DisplacementField:
     node_ids: np.ndarray | None = None
     source: str = ""
     triangles: np.ndarray | None = None
+    result_set: str = ""
 
     def __post_init__(self):
         where = f" ({self.source})" if self.source else ""
@@ -190,6 +197,7 @@ class DisplacementField:
         object.__setattr__(self, "displacements", d)
         object.__setattr__(self, "node_ids", ids)
         object.__setattr__(self, "source", str(self.source))
+        object.__setattr__(self, "result_set", str(self.result_set))
 
     def _checked_triangles(self, n: int, where: str) -> np.ndarray | None:
         """``self.triangles`` as a read-only ``(T, 3 or 6)`` int64 array of rows below ``n``, or None."""
@@ -221,8 +229,8 @@ class DisplacementField:
         whose nodes are all kept, on the first row of each."""
         rows = np.asarray(rows, dtype=np.int64).reshape(-1)
         ids = None if self.node_ids is None else self.node_ids[rows]
-        return DisplacementField(self.points[rows], self.displacements[rows], ids, self.source,
-                                 _renumbered(self.triangles, rows, len(self)))
+        return replace(self, points=self.points[rows], displacements=self.displacements[rows], node_ids=ids,
+                       triangles=_renumbered(self.triangles, rows, len(self)))
 
     def __repr__(self) -> str:
         dmax = float(np.sqrt((self.displacements ** 2).sum(axis=1)).max())
@@ -239,8 +247,7 @@ class DisplacementField:
             raise FieldError(f"scale factor must be a number, got {factor!r}") from None
         if not (np.isfinite(f) and f > 0):
             raise FieldError(f"scale factor must be a positive finite number, got {factor!r}")
-        return DisplacementField(self.points * f, self.displacements * f, self.node_ids, self.source,
-                                 self.triangles)
+        return replace(self, points=self.points * f, displacements=self.displacements * f)
 
 
 def _renumbered(triangles: np.ndarray | None, rows: np.ndarray, n: int) -> np.ndarray | None:
@@ -358,8 +365,7 @@ def _in_mm(field: DisplacementField, units: str | None, stated: dict[str, str | 
     if fp == fd == 1.0:
         return field
     log.info("field file %s states its lengths in %s; scaled to mm", path, ", ".join(sorted(set(said.values()))))
-    return DisplacementField(field.points * fp, field.displacements * fd, field.node_ids, field.source,
-                             field.triangles)
+    return replace(field, points=field.points * fp, displacements=field.displacements * fd)
 
 
 def as_field(field, units: str | None = None, field_name: str | None = None, *, step: int | None = None,
@@ -466,8 +472,8 @@ def merge_duplicates(field: DisplacementField) -> DisplacementField:
         new = np.empty(n, dtype=np.int64)
         new[order] = row_of_group[group]
         triangles = new[field.triangles]
-    return DisplacementField(p[keep[keep_sorted]], mean[keep_sorted], ids, source=field.source,
-                             triangles=triangles)
+    return replace(field, points=p[keep[keep_sorted]], displacements=mean[keep_sorted], node_ids=ids,
+                   triangles=triangles)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -576,16 +582,14 @@ def _parse_frd(raw: bytes, path: str, field_name: str | None, step, points_from)
     frd = FrdFile(raw.decode("latin-1"), path)
     if field_name is None and step is None and frd.is_hot_to_cold():
         result = frd.hot_to_cold()
-        if result.count == 2:
-            log.info("%s: a hot2cold hot-to-cold run of a rotating part: displacement = DISP of step %d "
-                     "minus DISP of the first step", path, result.step)
     else:
         result = frd.result("DISP" if field_name is None else field_name, step)
+    log.info("%s: %s", path, result.label)
     points = result.points
     if points_from is not None:
         points = match_points(points_from, result.node_ids, result.points, path)
     return DisplacementField(points, result.values[:, :3], result.node_ids, source=path,
-                             triangles=result.triangles)
+                             triangles=result.triangles, result_set=result.label)
 
 
 #: Nastran bulk data (input decks), whose GRID cards give node positions (``points_from``).
@@ -666,8 +670,10 @@ def _parse_solver(kind: str, path: str, field_name: str | None, step: int | None
     elif points is None:
         raise FieldError(f"{path} holds no node positions; pass the model they belong to "
                          f"({option('field_points', 'model.bdf')}) to take them by node number")
+    label = f"result set {result.name}" if kind == "rst" else result.name
     return (DisplacementField(points, result.displacements, result.node_ids, source=path,
-                              triangles=getattr(result, "triangles", None)), getattr(result, "unit", None))
+                              triangles=getattr(result, "triangles", None), result_set=label),
+            getattr(result, "unit", None))
 
 
 def _parse_meshio(path: str, file_format: str | None, field_name: str | None) -> DisplacementField:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import logging
 import operator
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -82,6 +82,8 @@ class FrdResult:
     triangles : numpy.ndarray or None, (T, 3) or (T, 6) int64 rows of ``node_ids``: the boundary triangles
         of the file's elements (:attr:`FrdFile.elements`; those naming a node without a result dropped),
         or ``None`` when the file has no tetrahedra or triangles.
+    minus : FrdResult or None, the block subtracted from this one (a hot2cold deck of a rotating part:
+        :meth:`FrdFile.hot_to_cold`), else None.
     """
 
     node_ids: np.ndarray
@@ -94,6 +96,17 @@ class FrdResult:
     index: int
     count: int
     triangles: np.ndarray | None = None
+    minus: FrdResult | None = None
+
+    @property
+    def label(self) -> str:
+        """The block as CalculiX's post-processor CGX lists it, for the report: ``"DISP block 2 of 3: step 2,
+        time 1"`` (the block's place among those of its name, its header's step and value), or the
+        difference of two blocks."""
+        own = f"{self.name} block {self.index + 1} of {self.count}: step {self.step}, time {self.value:g}"
+        if self.minus is None:
+            return own
+        return f"{own}, minus block {self.minus.index + 1} (step {self.minus.step}, time {self.minus.value:g})"
 
 
 @dataclass
@@ -473,8 +486,7 @@ class FrdFile:
         first = self.result("DISP", 0)
         if not np.array_equal(first.node_ids, last.node_ids):
             raise FieldError(f"results file {self.path}: its two DISP blocks hold different nodes")
-        return FrdResult(last.node_ids, last.points, last.values - first.values, last.name, last.components,
-                         last.step, last.value, last.index, last.count, last.triangles)
+        return replace(last, values=last.values - first.values, minus=first)
 
     def datasets(self) -> list[str]:
         """Names of the result blocks, in file order (repeated per step)."""

@@ -22,7 +22,7 @@ the surface: an FE field's volume nodes give it.  A field of surface nodes alone
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -75,5 +75,5 @@ def invert_field(field: DisplacementField, tolerance: float = 1e-9, max_iteratio
         raise FieldError(f"inverting the cold-to-hot field {field.source} did not converge in {max_iterations} "
                          f"iterations (residual {residual:.3g} mm)")
     log.info("inverted the field in %d iterations, residual %.3g mm", len(history), residual)
-    return (DisplacementField(field.points, d, field.node_ids, field.source, field.triangles),
+    return (replace(field, displacements=d),
             Inversion(len(history), residual, history, converged))

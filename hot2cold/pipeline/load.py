@@ -66,5 +66,5 @@ def element_points(field: DisplacementField, settings: Settings) -> tuple[Displa
     ids = None if field.node_ids is None else np.concatenate([field.node_ids, np.full(len(positions), -1)])
     log.info("field %s: %d points inside its %d boundary triangles added to its %d nodes (the elements' shape "
              "functions)", field.source, len(positions), len(field.triangles), len(field))
-    return DisplacementField(np.vstack([field.points, positions]), np.vstack([field.displacements, values]),
-                             ids, field.source, field.triangles), len(positions)
+    return replace(field, points=np.vstack([field.points, positions]),
+                   displacements=np.vstack([field.displacements, values]), node_ids=ids), len(positions)

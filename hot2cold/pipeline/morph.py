@@ -189,9 +189,8 @@ class _Classifier:
             field = field.take(cls.node)
         if check:
             check_coverage(part, cls, field, settings, projector)
-        field = DisplacementField(field.points, carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
-                                                              settings.vertex_neighbours, GAP_SHARE * part.diagonal),
-                                  field.node_ids, field.source)
+        field = replace(field, displacements=carry_to_feet(field.points, cls.foot, field.displacements, cls.used,
+                                                           settings.vertex_neighbours, GAP_SHARE * part.diagonal))
         noise = scatter(cls.foot, field.displacements, [nodes for _, nodes in cls.groups(Role.FACE)])
         return cls, field, noise
 

@@ -277,6 +277,7 @@ class Report:
     edge_refinements: list[dict] = field(default_factory=list)
     g1: list[dict] = field(default_factory=list)
     element_points: int = 0
+    result_set: str = ""
 
     def misses(self) -> list[tuple[str, float]]:
         """Where the cold part misses the tolerance plus the field's scatter allowance, worst first: ``(where,
@@ -489,6 +490,8 @@ class Report:
         lines.append(f"edges: {len(self.edges)}, Δmax {_num(edge_max)} mm, largest edge-face gap {_num(gap)} mm")
         inside = (f" (of them {self.element_points} points inside the FE elements, by their shape functions)"
                   if self.element_points else "")
+        if self.result_set:
+            lines.append(f"field: {self.result_set} of {self.field}")
         lines.append(f"nodes: {self.nodes_total} total{inside}, {self.nodes_used} used "
                      f"({self.nodes_on_faces} inside a face, {self.nodes_on_edges} within {self.edge_distance:.3g} mm "
                      f"of an edge, {self.nodes_on_vertices} at a vertex), {self.nodes_ignored} ignored: farther than "
@@ -733,7 +736,7 @@ def build_report(context: Morphed, fits: Fits, checks: Checks, errors: np.ndarra
               for i, (h, c) in enumerate(zip(checks.hot, checks.cold))]
     all_err = errors[used]
     return Report(
-        hot=run.hot_name, field=field.source, nodes_total=cls.field_nodes,
+        hot=run.hot_name, field=field.source, result_set=field.result_set, nodes_total=cls.field_nodes,
         nodes_on_faces=int(np.sum(cls.role == Role.FACE)),
         nodes_on_edges=int(np.sum(cls.role == Role.EDGE)),
         nodes_on_vertices=int(np.sum(cls.role == Role.VERTEX)),

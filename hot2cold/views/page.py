@@ -128,7 +128,7 @@ def _summary(report) -> str:
         ("area measured", _e(verdict.measured_text) + (f" ({unmeasured} {'face' if unmeasured == 1 else 'faces'} "
                                                        f"partly unmeasured)" if unmeasured else "")),
         ("hot part", _e(report.hot or "–")),
-        ("field", _e(report.field or "–")),
+        ("field", _e(report.field or "–") + (f" ({_e(report.result_set)})" if report.result_set else "")),
         ("cold part", _flag(report.valid, "valid", "INVALID", green) + ", "
          + _flag(report.free_edges == 0, "closed", f"{report.free_edges} free edges", green)),
         ("Δmax / Δmean", f"{_mm(report.delta_max)} mm / {_mm(report.delta_mean)} mm"),
