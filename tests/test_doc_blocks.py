@@ -54,6 +54,12 @@ def scale():
         yield module
 
 
+@pytest.fixture(scope="module")
+def frd_files():
+    with benchmark_module("frd_files") as module:
+        yield module
+
+
 def test_blocks_are_found_with_names_and_indentation(doc_blocks):
     found = doc_blocks.blocks(PAGE)
     assert [(b.name, b.indent) for b in found] == [("first", ""), ("second", "  ")]
@@ -178,3 +184,16 @@ def test_scale_show_doc_writes_the_page_and_refuses_a_missing_block(tmp_path, mo
     assert "no block scale_rotor37" in capsys.readouterr().err
     assert page.read_text(encoding="utf-8") == written
     assert scale.main(["--show", str(rows), "--blades", "thin_blade", "--doc", str(page)]) == 0
+
+
+def test_frd_files_blocks_are_in_their_pages(doc_blocks, frd_files):
+    for name, page in frd_files.DOC_PAGES.items():
+        assert name in doc_blocks.names(page.read_text(encoding="utf-8")), f"no block {name} in {page}"
+    rows = [{"file": "a.frd", "kinds": "he20,te10", "outcome": "same", "why": "", "notes": [],
+             "blocks": ["DISP block 1 of 2: step 1, time 1", "DISP block 2 of 2: step 2, time 2"]},
+            {"file": "b.frd", "kinds": "he8", "outcome": "refused", "why": "no DISP | here", "notes": [], "blocks": []}]
+    made = frd_files.doc_tables(rows)
+    assert set(made) == set(frd_files.DOC_PAGES)
+    assert "| same | 1 | 2 | 1 | 0 | 1 |" in made["frd_files_outcomes"]      # the kinds he20, he8, te10 sorted
+    assert "| total | 2 | 2 | 1 | 1 | 1 |" in made["frd_files_outcomes"]
+    assert "| `b.frd` | he8 | 0 |  | refused | no DISP / here |" in made["frd_files_rows"]

@@ -165,6 +165,35 @@ def test_frd_of_a_hot2cold_deck_is_the_difference_of_its_steps(tmp_path):
         read_field(three)
 
 
+def test_frd_displacements_beside_rotations_are_the_first_three(tmp_path, caplog):
+    """Shells and beams with rotational freedoms store D1-D6 (CalculiX's own test ``lin_stat_cooks_beam_128``), an
+    electromagnetic run D1-D5: the displacements are D1-D3, the rest is said and not used."""
+    rotations = np.column_stack([U1, U2])
+    six = result_block("DISP", ["D1", "D2", "D3", "D4", "D5", "D6"], IDS, rotations)
+    path = write(tmp_path, frd_text(six))
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.frd"):
+        f = read_field(path)
+    np.testing.assert_array_equal(f.displacements, rounded(U1))
+    assert "holds D4, D5, D6 besides the displacements D1-D3: not used" in caplog.text
+    # a block of six that does not begin with D1-D3 is not a displacement
+    other = result_block("DISP", ["R1", "R2", "R3", "R4", "R5", "R6"], IDS, rotations)
+    with pytest.raises(FieldError, match=r"stores 6 component\(s\) \(R1, R2"):
+        read_field(write(tmp_path, frd_text(other), "other.frd"))
+
+
+def test_frd_element_block_with_more_elements_than_its_header_counts(tmp_path):
+    """CalculiX counts a deck's beams and shells in the element header and writes the solid elements it expanded
+    them into as well (its tests ``concretebeam``, ``shell3``): more elements than counted are read; fewer are
+    refused (``test_field_elements``)."""
+    block = element_block()
+    second = [block[1].replace(f"{1:10d}", f"{2:10d}", 1), block[2]]
+    text = frd_text(disp()).replace("\n".join(block), "\n".join(block[:3] + second + block[3:]))
+    assert text.count("    3C") == 1 and f"{1:12d}" in text.splitlines()[text.splitlines().index(block[0])]
+    frd = FrdFile.read(write(tmp_path, text))
+    assert frd.element_kinds() == {"te10": 2}
+    np.testing.assert_array_equal(read_field(write(tmp_path, text, "again.frd")).displacements, rounded(U1))
+
+
 def test_frd_field_name_picks_another_vector_dataset(tmp_path):
     forc = result_block("FORC", ["F1", "F2", "F3"], IDS, U2 * 1000, 1)
     path = write(tmp_path, frd_text(forc, disp(U1, 1)))

@@ -325,7 +325,9 @@ def _parse_elements(lines: list[str], block: _Block, path: str) -> tuple[np.ndar
         raise FieldError(
             f"results file {path} line {block.start + 1}: a ' -2' node record before any ' -1' element record "
             f"in {what}; the file is malformed")
-    if block.numnod is not None and block.numnod > 0 and block.numnod != len(heads):
+    # Fewer elements than the header counts: some are lost.  More: CalculiX counts the deck's elements and
+    # writes, for beams and shells, the solid elements it expanded them into as well.
+    if block.numnod is not None and block.numnod > len(heads):
         raise FieldError(
             f"results file {path}: {what} announces {block.numnod} elements but holds {len(heads)}; the file is "
             f"malformed or truncated")
@@ -435,6 +437,17 @@ class FrdFile:
             self._elements = {t: np.concatenate(parts) for t, parts in sorted(kept.items())}
         return self._elements
 
+    def element_kinds(self) -> dict[str, int]:
+        """How many elements of each kind (CalculiX's names: he8, te10, tr3, ...) the file's element blocks hold,
+        every kind, not only those :attr:`elements` takes."""
+        counts: dict[str, int] = {}
+        for block in self._element_blocks:
+            types = _parse_elements(self._lines, block, self.path)[0]
+            for t, c in zip(*np.unique(types, return_counts=True)):
+                name = _TYPE_NAMES.get(int(t), f"type {int(t)}")
+                counts[name] = counts.get(name, 0) + int(c)
+        return counts
+
     def boundary_triangles(self) -> np.ndarray | None:
         """The boundary triangles of :attr:`elements` (:func:`hot2cold.io.cells.element_triangles`), ``(T, 3)``
         or ``(T, 6)`` int64 node numbers; None when the file has no tetrahedra or triangles."""
@@ -521,7 +534,10 @@ class FrdFile:
                     f"{-len(matching)}..{len(matching) - 1} (0 = first, -1 = last), got {step!r}")
             index %= len(matching)
         block = matching[index]
-        if block.ncomp != 3:
+        # a node with more freedoms (the rotations D4-D6 of shells and beams, the potentials of an
+        # electromagnetic run) stores them after its displacements D1-D3: the first three
+        translations = block.ncomp > 3 and tuple(c.upper() for c in block.components[:3]) == ("D1", "D2", "D3")
+        if block.ncomp != 3 and not translations:
             raise FieldError(
                 f"results file {path}: dataset {block.name} on line {block.header + 1} stores {block.ncomp} "
                 f"component(s) ({', '.join(block.components)}); a displacement is a vector of 3")
@@ -531,6 +547,10 @@ class FrdFile:
                              f"line {block.header + 1}")
         nvals = min(block.ncomp, _PER_LINE)
         ids, values = _parse_rows(self._lines, block, nvals, path, f"{block.name} block")
+        if translations:
+            log.info("%s: the %s block on line %d holds %s besides the displacements D1-D3: not used", path,
+                     block.name, block.header + 1, ", ".join(block.components[3:nvals]))
+            values, nvals = values[:, :3], 3
         if len(ids) == 0:
             raise FieldError(
                 f"results file {path}: the {block.name} block on line {block.header + 1} holds no node")
