@@ -164,6 +164,28 @@ def test_truncated_message_names_table_and_byte(tmp_path):
     assert int(message.split("at byte ")[1].split(";")[0]) < at
 
 
+def _records(*payloads: bytes) -> bytes:
+    return b"".join(struct.pack("<i", len(p)) + p + struct.pack("<i", len(p)) for p in payloads)
+
+
+def _marker(m: int) -> bytes:
+    return struct.pack("<i", m)
+
+
+def test_a_table_of_another_structure_before_any_displacement_is_named(tmp_path):
+    """A matrix table (written by OUTPUT2: 18 of pyNastran's models) does not read as a table of result records;
+    with no displacements before it, the file lacks displacements: said so, naming the table, not "corrupt"."""
+    head = [_marker(2), b"DSCM2   ", _marker(-1), _marker(7), bytes(28), _marker(-2)]
+    path = tmp_path / "matrix.op2"
+    path.write_bytes(_records(*head, _marker(1), _marker(1), _marker(0)))
+    message = one_line_error(lambda: read_op2(path), "holds no static real SORT1 displacements before table DSCM2")
+    assert "a matrix or another table of its own structure: marker 1 where 0 belongs at byte" in message
+    assert "write it again" not in message
+    # a file cut inside a table is still a damaged file
+    path.write_bytes(_records(*head, _marker(1)))
+    assert "is truncated" in one_line_error(lambda: read_op2(path))
+
+
 def test_empty_file(tmp_path):
     path = tmp_path / "empty.op2"
     path.write_bytes(b"")

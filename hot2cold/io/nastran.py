@@ -180,6 +180,15 @@ _APPROACH = {1: "statics", 2: "real eigenvalues", 3: "differential stiffness", 5
              10: "nonlinear statics", 11: "geometric nonlinear statics"}
 
 
+class _Unreadable(FieldError):
+    """A record of the OP2 that does not read as the table structure expects: ``what``, in ``table`` (None:
+    outside a table), at byte ``at``."""
+
+    def __init__(self, message: str, what: str, table: str | None, at: int):
+        super().__init__(message)
+        self.what, self.table, self.at = what, table, at
+
+
 class _Op2:
     """A cursor over the Fortran records of an OP2 held in ``buf``; errors name ``path``, table and byte."""
 
@@ -187,9 +196,10 @@ class _Op2:
         self.buf, self.path, self.pos, self.table = buf, path, 0, None
 
     def fail(self, what: str, at: int | None = None):
+        at = self.pos if at is None else at
         where = f" in table {self.table}" if self.table else ""
-        raise FieldError(f"{self.path} {what}{where} at byte {self.pos if at is None else at}; "
-                         f"write it again or pass the .op2 Nastran wrote (PARAM,POST,-1)")
+        raise _Unreadable(f"{self.path} {what}{where} at byte {at}; write it again or pass the .op2 Nastran "
+                          f"wrote (PARAM,POST,-1)", what, self.table, at)
 
     def record(self) -> bytes:
         """The payload of the next Fortran record."""
@@ -544,15 +554,27 @@ def _read_op2(buf, path: str, field_name, step) -> NastranResult:
     op2 = _Op2(buf, path)
     _header(op2)
     sets, set_tables, skipped, geometry = [], [], [], []
-    for name, records, first in _tables(op2):
-        if _is_geometry(name):
-            geometry.extend(records)
-        elif not records and (ident := _ident(first)) and ident["table_code"] in _OTHER_RESULTS:
-            skipped.append(f"{_OTHER_RESULTS[ident['table_code']]} in {name}")
-        elif records:
-            found = _displacement_sets(name, records, path, skipped)
-            sets += found
-            set_tables += [name] * len(found)
+    try:
+        for name, records, first in _tables(op2):
+            if _is_geometry(name):
+                geometry.extend(records)
+            elif not records and (ident := _ident(first)) and ident["table_code"] in _OTHER_RESULTS:
+                skipped.append(f"{_OTHER_RESULTS[ident['table_code']]} in {name}")
+            elif records:
+                found = _displacement_sets(name, records, path, skipped)
+                sets += found
+                set_tables += [name] * len(found)
+    except _Unreadable as exc:
+        if exc.table is None or sets or not exc.what.startswith("is not a valid OP2"):    # cut short, corrupt
+            raise
+        # A table of another structure (a matrix written by OUTPUT2, ...) with nothing to take before it:
+        # what the file lacks is the displacements, not a well-formed table
+        other = f"; before it, it holds {', '.join(dict.fromkeys(skipped))}" if skipped else ""
+        reason = exc.what.removeprefix("is not a valid OP2 (").removesuffix(")")
+        raise FieldError(f"{path} holds no static real SORT1 displacements before table {exc.table}, which this "
+                         f"reader cannot read past (a matrix or another table of its own structure: {reason} at "
+                         f"byte {exc.at}){other}; request DISPLACEMENT(PLOT)=ALL in a static subcase (SOL 101 or "
+                         f"106) with PARAM,POST,-1") from None
     if not sets:
         other = f"; it holds {', '.join(dict.fromkeys(skipped))}" if skipped else ""
         raise FieldError(f"{path} holds no static real SORT1 displacements{other}; request "
