@@ -115,9 +115,11 @@ def test_frd_node_ids_beyond_short_width_touch_values(tmp_path):
     np.testing.assert_array_equal(f.displacements, rounded(U1[:2]))
 
 
-def test_frd_results_for_a_subset_in_another_order(tmp_path):
+def test_frd_results_for_a_subset_in_another_order(tmp_path, caplog):
     order = [5, 0, 3]
-    f = read_field(write(tmp_path, frd_text(disp(U1[order], ids=IDS[order]))))
+    with caplog.at_level(logging.INFO, logger="hot2cold.io.frd"):
+        f = read_field(write(tmp_path, frd_text(disp(U1[order], ids=IDS[order]))))
+    assert "3 of the file's 6 nodes have no value in the DISP block on line" in caplog.text
     np.testing.assert_array_equal(f.node_ids, IDS[order])
     np.testing.assert_array_equal(f.points, rounded(XYZ[order]))
     np.testing.assert_array_equal(f.displacements, rounded(U1[order]))

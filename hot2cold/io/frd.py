@@ -566,6 +566,9 @@ class FrdFile:
                 f"{int(ids[missing][0])}) have no coordinates in the node block on line {node_block.header + 1}")
         log.debug("%s: %s block %d of %d (step %d, value %g), %d nodes", path, block.name, index + 1,
                   len(matching), block.step, block.value, len(ids))
+        if len(ids) < len(sorted_ids):    # *NODE FILE of a node set, or nodes of no element: said, not dropped
+            log.info("%s: %d of the file's %d nodes have no value in the %s block on line %d (not in the field)",
+                     path, len(sorted_ids) - len(ids), len(sorted_ids), block.name, block.header + 1)
         return FrdResult(ids, sorted_xyz[pos], values, block.name, block.components[:nvals], block.step,
                          block.value, index, len(matching), self._triangle_rows(ids))
 
