@@ -94,6 +94,14 @@ def benchmark_module(name: str):
         sys.modules.pop("real_parts", None)
 
 
+@pytest.fixture(scope="module")
+def real_parts():
+    """``benchmarks/real_parts.py`` as a module (:func:`benchmark_module`): its functions and its tables are
+    tested in ``test_real_parts.py`` and ``test_doc_blocks.py``."""
+    with benchmark_module("real_parts") as module:
+        yield module
+
+
 #: Debian's Chromium, for the 3D report's tests.
 CHROMIUM = "chromium"
 #: What makes WebGL work in headless Chromium without a GPU: SwiftShader, allowed explicitly.

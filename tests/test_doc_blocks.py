@@ -43,12 +43,6 @@ def doc_blocks():
 
 
 @pytest.fixture(scope="module")
-def real_parts():
-    with benchmark_module("real_parts") as module:
-        yield module
-
-
-@pytest.fixture(scope="module")
 def scale():
     with benchmark_module("scale") as module:
         yield module

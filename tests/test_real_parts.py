@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import benchmark_module
 
 from hot2cold.kernel.step import read_step
 
@@ -23,9 +22,9 @@ BLOCK = ROOT / "sample_parts" / "filleted_block.step"
 
 
 @pytest.fixture(scope="module")
-def bench():
-    with benchmark_module("real_parts") as module:
-        yield module
+def bench(real_parts):
+    """``benchmarks/real_parts.py`` (conftest's ``real_parts``), by a short name."""
+    return real_parts
 
 
 @pytest.fixture(scope="module")

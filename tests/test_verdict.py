@@ -93,7 +93,7 @@ def _header(report) -> str:
 
 
 def _css_rules() -> dict[str, str]:
-    return {sel.strip(): body for sel, body in re.findall(r"([^{}]+)\{([^}]*)\}", page._STYLE)}
+    return {sel.strip(): body for sel, body in re.findall(r"([^{}]+)\{([^}]*)\}", page.STYLE)}
 
 
 # ----------------------------------------------------------------------------------------------------------

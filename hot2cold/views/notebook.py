@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import html
 
-from .page import _STYLE, _face_table, _summary, _verdict, render_html
+from .page import STYLE, head_sections, render_html
 
 #: The height of a result's frame in a notebook (CSS pixels): the verdict, the figures and the 3D view.
 FRAME_HEIGHT = 980
@@ -26,8 +26,7 @@ def result_html(result, colour: str = "displacement") -> str:
 
 def report_html(report) -> str:
     """The notebook display of ``report`` (a Report): its verdict, its figures and the face table."""
-    return (f'<div class="hot2cold-report"><style>{_scoped(_STYLE)}</style>'
-            f"{_verdict(report)}{_summary(report)}{_face_table(report)}</div>")
+    return f'<div class="hot2cold-report"><style>{_scoped(STYLE)}</style>{head_sections(report)}</div>'
 
 
 def _scoped(style: str) -> str:

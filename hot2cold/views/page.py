@@ -30,7 +30,8 @@ from ..pipeline.report import Tone
 
 log = logging.getLogger(__name__)
 
-_STYLE = """
+#: The report page's style sheet (CSS): also the notebook's, scoped there to the report's ``<div>``.
+STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 1.5em auto;
        max-width: 1250px; padding: 0 1em; color: #222; line-height: 1.4; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; margin-top: 1.6em;
@@ -135,6 +136,12 @@ def _summary(report) -> str:
         ("largest displacement", f"{report.max_displacement:.4g} mm"),
     ]
     return '<dl class="summary">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+
+
+def head_sections(report) -> str:
+    """The first sections of the page of ``report``: its verdict, its figures and the face table (HTML without
+    script; a report in a notebook is these, :func:`hot2cold.views.notebook.report_html`)."""
+    return f"{_verdict(report)}{_summary(report)}{_face_table(report)}"
 
 
 def _face_table(report) -> str:
@@ -301,7 +308,7 @@ def render_html(result, scale: float | None = None, *, interactive: bool = True,
     ]
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             f"<title>{_e(title)}: {_e(report.verdict.state.value)}</title>\n"
-            f"<style>{_STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
+            f"<style>{STYLE}{_VIEWER_STYLE if interactive else ''}</style>\n"
             "</head>\n<body>\n"
             + "\n".join(body) + "\n</body>\n</html>\n")
 
