@@ -141,6 +141,13 @@ def test_frd_last_block_by_default_and_step_choice(tmp_path):
     # the set taken is named as CGX lists it: its place among the DISP blocks, the header's step and time
     assert read_field(path).result_set == "DISP block 2 of 2: step 2, time 2"
     assert read_field(path, step=0).result_set == "DISP block 1 of 2: step 1, time 1"
+    # and is taken by that step number as the user reads it there
+    np.testing.assert_array_equal(read_field(path, field_name="step 1").displacements, rounded(U1))
+    np.testing.assert_array_equal(read_field(path, field_name="disp  Step 2").displacements, rounded(U2))
+    with pytest.raises(FieldError, match=r"has no DISP block of step 3; its DISP blocks are of steps 1-2"):
+        read_field(path, field_name="step 3")
+    with pytest.raises(FieldError, match="by its step number .* or by its index .*, not both"):
+        read_field(path, field_name="step 1", step=0)
     frd = FrdFile.read(path)
     assert frd.datasets() == ["DISP", "STRESS", "DISP"]
     assert frd.count("disp") == 2

@@ -155,8 +155,9 @@ class MorphOptions:
     field_name: str | None = _option(
         None, flag="--field-name", group=OptionGroup.FIELD, convert=to_text, type=str, metavar="NAME",
         help="which displacements to take: the point field of a VTK/VTU file (default: U, displacement or DISP), "
-        "the dataset of an .frd (DISP), the result set of an ANSYS .rst (LS,SUB) or the subcase of a Nastran "
-        ".op2/.pch (its id); default the last")
+        "the dataset of an .frd (DISP) or its block by step number as CGX lists it ('step 3'), the result set of "
+        "an ANSYS .rst (LS,SUB) or the subcase of a Nastran .op2/.pch (its id); default the last; the report "
+        "names the set taken")
     field_step: int | None = _option(
         None, flag="--field-step", group=OptionGroup.FIELD, convert=to_count, type=int, metavar="N",
         help="which result set of a solver results file (.frd, .rst, .op2, .pch), counting from 0 in file "

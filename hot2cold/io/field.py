@@ -24,7 +24,8 @@ integer rows of ``points`` gives the FE model's boundary triangles (:attr:`Displ
 
 *CalculiX results* ``.frd`` (ASCII; recognised by the extension or by its first record ``    1C``): the
 node block and the last ``DISP`` result block (or the block chosen by ``step``, counting ``DISP`` blocks
-from 0; or the dataset named by ``field_name``), read by fixed columns (:mod:`hot2cold.io.frd`).  The
+from 0; or the dataset named by ``field_name``, or the block of a step as CGX lists it, ``field_name="step
+3"``), read by fixed columns (:mod:`hot2cold.io.frd`).  The
 ``.frd`` of a hot2cold hot-to-cold deck (:mod:`hot2cold.fe.calculix`, recognised by its heading) gives its
 hot -> cold field: for a rotating part the last ``DISP`` block minus the first.
 ``node_ids`` are the CalculiX node numbers; the element block's tetrahedra (C3D4, C3D10) give the boundary

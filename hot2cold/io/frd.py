@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import operator
+import re
 import os
 from dataclasses import dataclass, replace
 
@@ -513,7 +514,10 @@ class FrdFile:
     def result(self, dataset: str = "DISP", step: int | None = None) -> FrdResult:
         """One result block: see :func:`read_frd`."""
         path = self.path
-        want = dataset.strip().upper()
+        want, numbered = _dataset_and_step(dataset)
+        if numbered is not None and step is not None:
+            raise FieldError(f"results file {path}: give the block by its step number ({dataset!r}) or by its "
+                             f"index (step {step!r}), not both")
         matching = [b for b in self._results if b.name.upper() == want]
         if not matching:
             found = sorted({b.name for b in self._results})
@@ -521,7 +525,13 @@ class FrdFile:
                 f"results file {path} has no {want} result block (found: "
                 f"{', '.join(found) or 'no result block'}); request the displacements in the deck with "
                 f"'*NODE FILE' and 'U'")
-        if step is None:
+        if numbered is not None:
+            steps = [b.step for b in matching]
+            if numbered not in steps:
+                raise FieldError(f"results file {path} has no {want} block of step {numbered}; its {want} blocks "
+                                 f"are of steps {_ranges(steps)}")
+            index = len(steps) - 1 - steps[::-1].index(numbered)      # the last block of that step
+        elif step is None:
             index = len(matching) - 1
         else:
             try:
@@ -589,6 +599,32 @@ class FrdFile:
         return (*self._coords[k], block)
 
 
+_NUMBERED = re.compile(r"^(?:(\w+)\s+)?STEP\s*(\d+)$")
+
+
+def _dataset_and_step(dataset: str) -> tuple[str, int | None]:
+    """The dataset name and, when ``dataset`` names one as CGX lists the blocks (``"step 3"``, ``"DISP step
+    3"``), the step number of the block's header: ``("DISP", 3)``; else ``(name, None)``."""
+    text = " ".join(dataset.strip().upper().split())
+    found = _NUMBERED.match(text)
+    if found is None:
+        return text, None
+    return found.group(1) or "DISP", int(found.group(2))
+
+
+def _ranges(numbers: list[int]) -> str:
+    """``1-4, 7, 9-10`` of the distinct ``numbers``."""
+    distinct = sorted(set(numbers))
+    runs, start = [], None
+    for k, n in enumerate(distinct):
+        if start is None:
+            start = n
+        if k + 1 == len(distinct) or distinct[k + 1] != n + 1:
+            runs.append(f"{start}-{n}" if n > start else f"{n}")
+            start = None
+    return ", ".join(runs)
+
+
 def _n_elements(count: int) -> str:
     return f"{count} element" + ("" if count == 1 else "s")
 
@@ -605,7 +641,9 @@ def read_frd(path, dataset: str = "DISP", step: int | None = None) -> FrdResult:
     ----------
     path : str or os.PathLike
     dataset : str
-        The dataset name (``-4`` record), case-insensitive; ``DISP`` by default.
+        The dataset name (``-4`` record), case-insensitive; ``DISP`` by default.  ``"step 3"`` or ``"DISP step
+        3"`` names a block as CalculiX's post-processor CGX lists it, by the step number of its header (the
+        last block of that step if it has several).
     step : int or None
         Which of the file's blocks of that name, counting from 0 in file order (negative from the end);
         ``None``: the last one (the final state of the last step).
