@@ -497,6 +497,8 @@ _BETWEEN_MARGIN, _BETWEEN_FLOOR = 2.0, 1e-3
 _FOREIGN_SHARE = 0.5
 #: Nearest neighbours of each node whose displacements estimate the field's strain.
 _STRAIN_NEIGHBOURS = 8
+#: Nodes whose neighbours' differences are held at once in the strain estimate (bounds its memory).
+_STRAIN_CHUNK = 65_536
 
 
 @dataclass(frozen=True)
@@ -525,18 +527,7 @@ class FieldScale:
         used = classification.used
         points, disp = field.points[used], field.displacements[used]
         largest = float(np.linalg.norm(disp, axis=1).max()) if len(disp) else 0.0
-        strain = 0.0
-        if len(points) > 1:
-            k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
-            d, j = kd_tree(points).query(points, k=k, workers=-1)
-            d, j = d[:, 1:], j[:, 1:]
-            du = disp[j] - disp[:, None, :]                                        # (n, k - 1, 3)
-            # the largest ratio found on the squares (no square root per pair), then taken as it is
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = np.einsum("nkc,nkc->nk", du, du) / (d * d)
-            ratio[d <= 0] = -1.0           # the rows of one node that feeds two solids are one point
-            i, m = np.unravel_index(np.argmax(ratio), ratio.shape)
-            strain = float(np.linalg.norm(du[i, m]) / d[i, m]) if ratio[i, m] >= 0 else 0.0
+        strain = _strain(points, disp) if len(points) > 1 else 0.0
         return cls(largest, strain, classification.node_distance)
 
     @property
@@ -555,6 +546,28 @@ class FieldScale:
         """The largest ``|V_cold / V_hot - 1|`` accepted: ``_VOLUME_MARGIN ((1 + strain)^3 - 1) +
         _VOLUME_FLOOR``."""
         return _VOLUME_MARGIN * ((1.0 + self.strain) ** 3 - 1.0) + _VOLUME_FLOOR
+
+
+def _strain(points: np.ndarray, disp: np.ndarray) -> float:
+    """:attr:`FieldScale.strain` of the nodes ``points (n, 3)``, ``n >= 2``, moving by ``disp (n, 3)``: the largest
+    ``|du| / |dx|`` to their ``_STRAIN_NEIGHBOURS`` nearest, ``_STRAIN_CHUNK`` nodes at a time."""
+    k = min(_STRAIN_NEIGHBOURS, len(points) - 1) + 1
+    tree = kd_tree(points)
+    best, strain = -1.0, 0.0
+    for start in range(0, len(points), _STRAIN_CHUNK):
+        these = slice(start, start + _STRAIN_CHUNK)
+        d, j = tree.query(points[these], k=k, workers=-1)
+        d, j = d[:, 1:], j[:, 1:]
+        du = disp[j] - disp[these, None, :]                                        # (c, k - 1, 3)
+        # the largest ratio found on the squares (no square root per pair), then taken as it is
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.einsum("nkc,nkc->nk", du, du) / (d * d)
+        ratio[d <= 0] = -1.0           # the rows of one node that feeds two solids are one point
+        i, m = np.unravel_index(np.argmax(ratio), ratio.shape)
+        if ratio[i, m] > best:         # the first of equal ratios, as over all nodes at once
+            best = ratio[i, m]
+            strain = float(np.linalg.norm(du[i, m]) / d[i, m]) if best >= 0 else 0.0
+    return strain
 
 
 def _face_at(part: Part, k: int) -> str:
