@@ -157,25 +157,18 @@ class _FaceNodes:
             self._local = FieldEstimator(self._foot, self._displacements, self._neighbours, tree=self.tree)
         return self._local
 
-    def slack(self, points: np.ndarray) -> np.ndarray:
-        """The slack ``(m,)`` (mm) of ``points (m, 3)`` near the nodes: the largest miss of :attr:`local` at their
-        ``_SLACK_NODES`` nearest nodes (:attr:`FaceGrid.slack`)."""
-        return self._largest_nearby(points, self.misses)
-
-    def uncertainty(self, points: np.ndarray) -> np.ndarray:
-        """The uncertainty ``(m,)`` (mm) of the estimate at ``points (m, 3)`` near the nodes: the largest miss of
-        :attr:`local` at their ``_SLACK_NODES`` nearest nodes, each left out of it (:attr:`FaceGrid.uncertainty`)."""
-        return self._largest_nearby(points, self.left_out_misses)
-
-    def _largest_nearby(self, points: np.ndarray, misses: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-        """The largest of ``misses`` ``(m,)`` (mm) at the ``_SLACK_NODES`` nearest nodes of ``points (m, 3)``;
-        ``misses(asked)`` is asked for those nodes only (a face's grid is sparser than its nodes)."""
+    def slack_and_uncertainty(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """At ``points (m, 3)`` near the nodes, the slack ``(m,)`` (mm): the largest miss of :attr:`local` at their
+        ``_SLACK_NODES`` nearest nodes (:attr:`FaceGrid.slack`), and the uncertainty ``(m,)`` (mm) of the estimate:
+        the largest miss at those nodes, each left out of it (:attr:`FaceGrid.uncertainty`).  The misses are
+        asked for those nodes only (a face's grid is sparser than its nodes)."""
         if not len(points):
-            return np.zeros(0)
+            return np.zeros(0), np.zeros(0)
         closest = self.tree.query(points, k=min(_SLACK_NODES, len(self.nodes)), workers=-1)[1]
         closest = closest.reshape(len(points), -1)
         asked, at = np.unique(closest, return_inverse=True)
-        return misses(asked)[at.reshape(closest.shape)].max(axis=1)
+        at = at.reshape(closest.shape)
+        return self.misses(asked)[at].max(axis=1), self.left_out_misses(asked)[at].max(axis=1)
 
     def misses(self, asked: np.ndarray) -> np.ndarray:
         """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``)."""
@@ -277,8 +270,10 @@ class FaceGridder:
                 if near.any() and mine.own:
                     own = near
                     expected[near] += mine.local(hot[near])
-                    slack[near] = mine.slack(hot[near]) if find_slack else np.nan
-                    uncertainty[near] = mine.uncertainty(hot[near]) if find_slack else np.nan
+                    if find_slack:
+                        slack[near], uncertainty[near] = mine.slack_and_uncertainty(hot[near])
+                    else:
+                        slack[near] = uncertainty[near] = np.nan
             if (~own).any():
                 expected[~own] += estimator(hot[~own])
             if elements is not None and len(uv):
@@ -303,8 +298,7 @@ def with_slack(part: Part, grids: list[FaceGrid], face_nodes: FaceNodes, threads
         missing = np.isnan(grid.slack)
         slack, uncertainty = grid.slack.copy(), grid.uncertainty.copy()
         nodes = face_nodes.of(part, part.faces[k])
-        slack[missing] = nodes.slack(grid.hot[missing])
-        uncertainty[missing] = nodes.uncertainty(grid.hot[missing])
+        slack[missing], uncertainty[missing] = nodes.slack_and_uncertainty(grid.hot[missing])
         return replace(grid, slack=slack, uncertainty=uncertainty)
 
     todo = [k for k, grid in enumerate(grids) if np.isnan(grid.slack).any()]
