@@ -72,6 +72,22 @@ def _refused(capsys, argv, code, *words):
     return err
 
 
+@pytest.mark.heavy
+def test_a_reader_that_stops_reading_stops_the_printing_not_the_work(tmp_path, block_step, block_field):
+    """``hot2cold morph ... | head -1``: the pipe closes after the verdict; the cold part and the report are
+    still written, the exit code is the run's, and no "internal error" is said."""
+    out, report = tmp_path / "cold.step", tmp_path / "report.json"
+    proc = subprocess.Popen([sys.executable, "-m", "hot2cold", "morph", str(block_step), str(block_field), "-o",
+                             str(out), "--report", str(report), "--html", str(tmp_path / "r.html")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    proc.stdout.close()                       # the reader is gone before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=600) == 0, err
+    assert "internal error" not in err and "Broken pipe" not in err, err
+    assert out.stat().st_size > 1000 and report.is_file() and (tmp_path / "r.html").is_file()
+    assert check_solids(read_step(out))[0].valid
+
+
 def test_missing_step(tmp_path, block_field, capsys):
     out = tmp_path / "cold.step"
     _refused(capsys, ["morph", str(tmp_path / "nope.step"), str(block_field), "-o", str(out)], 2, "not found")

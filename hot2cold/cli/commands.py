@@ -235,7 +235,7 @@ def _morph(args) -> int:
     except StepReadError as exc:
         raise _no_solid(args.hot, exc) from exc
     if not args.quiet:
-        print(in_words(result.report.table()))    # the verdict its first line
+        _say(in_words(result.report.table()))     # the verdict its first line
     missed = tolerance_missed(result)
     written = args.written = []         # for the messages of a failure or an interruption from here on
     what = {path: name for name, path in _outputs(args)}
@@ -243,17 +243,17 @@ def _morph(args) -> int:
         for path in write_cold(result, args.output, args.report):   # report, check, STEP; atomic each
             written.append(path)
             if not args.quiet:
-                print(_wrote(path, what.get(path, "")))
+                _say(_wrote(path, what.get(path, "")))
         if missed and args.report is None:  # a part written off its tolerance is not left without its verdict
             args.report = Path(args.output).with_suffix(".report.json")
             write_json(result.report.to_dict(), args.report)
             written.append(args.report)
             if not args.quiet:
-                print(_wrote(args.report, "report"))
+                _say(_wrote(args.report, "report"))
         for path in _write_exports(args, result):
             written.append(path)
             if not args.quiet:
-                print(_wrote(path, what.get(path, "")))
+                _say(_wrote(path, what.get(path, "")))
     except OutputError as exc:
         raise OutputError(f"{exc} ({', '.join(map(str, written)) or 'nothing'} written)") from exc
     if missed:
@@ -270,6 +270,20 @@ _WHAT = {"output": "the cold part (STEP; read back and checked as valid closed s
          "--vtu surface": "the cold surface with its displacement (VTU, for ParaView)",
          "--stl": "the cold part as triangles (binary STL, mm)",
          "--glb": "the cold part for glTF viewers (binary glTF, metres, Y up)"}
+
+
+def _say(text: str) -> None:
+    """Print ``text`` on stdout.  A reader that stops reading (``hot2cold morph ... | head -1``) stops the
+    printing, not the work: stdout then goes to the null device, and the files are written as without it."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        try:
+            quiet = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(quiet, sys.stdout.fileno())    # also the interpreter's last flush at exit finds no pipe
+            os.close(quiet)
+        except (OSError, ValueError):             # a stdout without a file descriptor: nothing to redirect
+            pass
 
 
 def _wrote(path: Path, what: str) -> str:
@@ -329,8 +343,8 @@ def _batch(args) -> int:
             if r["status"] == "failed":
                 print(f"hot2cold: job {r['name']} failed: {r['message']}", file=sys.stderr)
     else:
-        print(batch.summary_table(data))
-        print(f"wrote {summary}")
+        _say(batch.summary_table(data))
+        _say(f"wrote {summary}")
     return data["exit_code"]
 
 
