@@ -29,6 +29,7 @@ SCRIPT = textwrap.dedent("""
     import build123d as b3d
     import numpy as np
     from hot2cold import morph
+    from hot2cold.errors import InputError
     from hot2cold.kernel.sampling import fe_surface_nodes
     from hot2cold.testing.synthetic import AffineField
 
@@ -53,6 +54,12 @@ SCRIPT = textwrap.dedent("""
         cold = result.cold
         out[name] = dict(hot_type=type(hot).__name__, cold_type=type(cold).__name__, valid=cold.is_valid,
                          volume=cold.volume, delta=result.report.delta_max)
+    with b3d.BuildPart() as empty:
+        pass
+    try:
+        morph(empty, (nodes, thermal(nodes)))
+    except InputError as exc:
+        out["empty"] = str(exc)
     print(json.dumps(out))
 """)
 
@@ -89,3 +96,4 @@ def test_a_build123d_part_morphs_as_its_step_file_does_and_comes_back_as_build12
         # the thermal field shrinks every length by 0.4 %: the volume by 1.2 % (0.996 ** 3), to its tolerance
         assert run["volume"] == pytest.approx(40 * 20 * 10 * 0.996 ** 3, rel=1e-4)
         assert run["delta"] < 1e-3
+    assert out["empty"] == "the build123d BuildPart holds no shape: build the part first"

@@ -65,10 +65,11 @@ def as_topods(hot) -> TopoDS_Shape:
             return hot.toCompound().wrapped
     b3d = sys.modules.get("build123d")
     if b3d is not None:
-        if isinstance(hot, b3d.BuildPart):
-            hot = hot.part
-        if isinstance(hot, b3d.Shape) and hot.wrapped is not None:
-            return hot.wrapped
+        shape = hot.part if isinstance(hot, b3d.BuildPart) else hot
+        if isinstance(shape, b3d.Shape) and shape.wrapped is not None:
+            return shape.wrapped
+        if shape is not hot or isinstance(shape, b3d.Shape):
+            raise InputError(f"the build123d {type(hot).__name__} holds no shape: build the part first")
     raise InputError(f"cannot morph a {type(hot).__name__}: give a STEP path, a CadQuery or build123d shape, "
                      f"or a TopoDS_Shape")
 
