@@ -35,7 +35,6 @@ import argparse
 import json
 import logging
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -44,6 +43,7 @@ import numpy as np
 if str(Path(__file__).resolve().parent) not in sys.path:      # doc_blocks, beside this one
     sys.path.insert(0, str(Path(__file__).resolve().parent))
 import doc_blocks  # noqa: E402
+from reference_runs import Caught, extract, run_reference, short, show, work  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ISCPC/CalculiX-ccx-test commit whose ``test/*.frd.ref`` are read ("Fix check.sh for ccx_2.21").
@@ -86,16 +86,7 @@ def _worker_one(path: str) -> dict:
 
 
 def worker(out_dir: str, files: list[str]) -> int:
-    for path in files:
-        target = Path(out_dir) / (Path(path).name + ".npz")
-        try:
-            arrays = _worker_one(path)
-        except Exception as exc:
-            arrays = {"error": np.array(f"{type(exc).__name__}: {exc}".splitlines()[0][:300])}
-        np.savez_compressed(target, **arrays)
-        sys.stdout.write(f"{target.name}\n")
-        sys.stdout.flush()
-    return 0
+    return work(out_dir, files, _worker_one, npz_path)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -103,33 +94,6 @@ def worker(out_dir: str, files: list[str]) -> int:
 # --------------------------------------------------------------------------------------------------------
 def npz_path(frd: Path) -> Path:
     return NPZ / (frd.name + ".npz")
-
-
-def run_reference(files: list[Path], python: str) -> None:
-    todo = [f for f in files if not npz_path(f).exists()]
-    NPZ.mkdir(parents=True, exist_ok=True)
-    while todo:    # a worker killed by a file (a hard crash) loses only that file
-        subprocess.run([python, __file__, "--worker", str(NPZ), *map(str, todo)], capture_output=True, text=True,
-                       check=False)
-        rest = [f for f in todo if not npz_path(f).exists()]
-        if len(rest) == len(todo):
-            np.savez_compressed(npz_path(rest[0]), error=np.array("the reader's process died"))
-            rest = rest[1:]
-        todo = rest
-
-
-class _Lines(logging.Handler):
-    def __init__(self):
-        super().__init__(logging.INFO)
-        self.lines: list[str] = []
-
-    def emit(self, record):
-        self.lines.append(f"{record.levelname} {record.getMessage()}")
-
-
-def _short(text: str) -> str:
-    text = " ".join(str(text).split())
-    return text if len(text) <= 220 else text[:217] + "..."
 
 
 def _kinds(path: Path) -> str:
@@ -196,23 +160,18 @@ def compare(path: Path) -> dict:
     row = {"file": path.name.removesuffix(".ref"), "outcome": None, "why": "", "notes": [], "kinds": _kinds(path),
            "blocks": []}
     ref = dict(np.load(npz_path(path), allow_pickle=False))
-    handler = _Lines()
-    logger = logging.getLogger("hot2cold")
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
     ours, user = [], None
-    try:
-        frd = FrdFile.read(path)
-        ours = [frd.result("DISP", k) for k in range(frd.count("DISP"))]
-        user = read_field(path)
-    except FieldError as exc:
-        row.update(outcome="refused", why=_short(exc))
-    except Exception as exc:
-        row.update(outcome="crash", why=_short(f"{type(exc).__name__}: {exc}"))
-        return row
-    finally:
-        logger.removeHandler(handler)
-    row["notes"] += [line for line in handler.lines if line.startswith("WARNING")]
+    with Caught("hot2cold") as caught:
+        try:
+            frd = FrdFile.read(path)
+            ours = [frd.result("DISP", k) for k in range(frd.count("DISP"))]
+            user = read_field(path)
+        except FieldError as exc:
+            row.update(outcome="refused", why=short(exc, 220))
+        except Exception as exc:
+            row.update(outcome="crash", why=short(f"{type(exc).__name__}: {exc}", 220))
+            return row
+    row["notes"] += [f"{level} {message}" for level, message in caught.records if level == "WARNING"]
     row["blocks"] = [r.label for r in ours]
     if "error" in ref:
         row["notes"].append(f"ccx2paraview: {ref['error']}")
@@ -237,29 +196,15 @@ def compare(path: Path) -> dict:
 # --------------------------------------------------------------------------------------------------------
 # Running, printing
 # --------------------------------------------------------------------------------------------------------
-def extract(gitdir: str) -> None:
-    listing = subprocess.run(["git", "-C", gitdir, "ls-tree", "-r", COMMIT, "test"], capture_output=True,
-                             text=True, check=True).stdout
-    for line in listing.splitlines():
-        meta, name = line.split("\t", 1)
-        if not name.endswith(".frd.ref"):
-            continue
-        target = CACHE / name
-        if target.exists():
-            continue
-        blob = subprocess.run(["git", "-C", gitdir, "cat-file", "blob", meta.split()[2]], capture_output=True,
-                              check=False)
-        if blob.returncode:
-            sys.stdout.write(f"missing in {gitdir}: {name}\n")
-            continue
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_bytes(blob.stdout)
-
-
 ORDER = ("same", "differs", "refused", "crash", "reference fails")
 #: The blocks of the docs that ``--doc`` writes (:func:`doc_tables`), each with its page.
 DOC_PAGES = {"frd_files_outcomes": ROOT / "docs" / "benchmarks" / "frd_files.md",
              "frd_files_rows": ROOT / "docs" / "benchmarks" / "frd_files.md"}
+
+
+def _tag(row: dict) -> str:
+    """What :func:`reference_runs.show` prints before a row's reason: the file's element kinds."""
+    return row["kinds"]
 
 
 def _cell(text: str) -> str:
@@ -288,20 +233,6 @@ def doc_tables(rows: list[dict]) -> dict[str, str]:
     return {"frd_files_outcomes": "\n".join(lines) + "\n", "frd_files_rows": "\n".join(files) + "\n"}
 
 
-def show(rows: list[dict], out=sys.stdout) -> None:
-    width = max(len(r["file"]) for r in rows)
-    for r in rows:
-        out.write(f"{r['file']:<{width}}  {r['outcome']:<8}  [{r['kinds']}]  {r['why']}\n")
-        for note in r["notes"]:
-            out.write(f"{'':<{width}}    - {note}\n")
-    out.write("\n")
-    for kind in ORDER:
-        n = sum(r["outcome"] == kind for r in rows)
-        if n:
-            out.write(f"{kind}: {n}\n")
-    out.write(f"total: {len(rows)}\n")
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--json", type=Path, help="save the rows here")
@@ -316,19 +247,19 @@ def main(argv=None) -> int:
         return worker(args.worker[0], args.worker[1:])
     if args.show:
         rows = json.loads(args.show.read_text())
-        show(rows)
+        show(rows, ORDER, _tag)
         return doc_blocks.doc_main(args.doc, doc_tables(rows)) if args.doc else 0
     if args.doc and doc_blocks.doc_main(args.doc, table_names=list(DOC_PAGES)):
         return 2
     if args.extract:
-        extract(args.extract)
+        extract(args.extract, COMMIT, "test", lambda name: name.endswith(".frd.ref"), CACHE)
     if not FILES.is_dir():
         sys.stderr.write(f"{FILES} is missing: run with --extract GITDIR first\n")
         return 2
     files = sorted(p for p in FILES.glob("*.frd.ref") if args.only in p.name)
-    run_reference(files, args.reference)
+    run_reference(files, args.reference, __file__, NPZ, npz_path, "ccx2paraview")
     rows = [compare(p) for p in files]
-    show(rows)
+    show(rows, ORDER, _tag)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1))

@@ -42,11 +42,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+
+if str(Path(__file__).resolve().parent) not in sys.path:      # reference_runs, beside this one
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+from reference_runs import Caught, extract, run_reference, short, show, work  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: pyNastran commit whose ``models/`` are read (SteveDoyle2/pyNastran, 2026-08-21 "fixing import").
@@ -110,17 +113,7 @@ def worker(out_dir: str, files: list[str]) -> int:
     import warnings
 
     warnings.simplefilter("ignore")
-    for path in files:
-        target = Path(out_dir) / (Path(path).relative_to(MODELS).as_posix().replace("/", "__") + ".npz")
-        try:
-            arrays = _worker_one(path)
-        except Exception as exc:
-            arrays = {"error": np.array(f"{type(exc).__name__}: {exc}".splitlines()[0][:300] if str(exc)
-                                        else type(exc).__name__)}
-        np.savez_compressed(target, **arrays)
-        sys.stdout.write(f"{target.name}\n")
-        sys.stdout.flush()
-    return 0
+    return work(out_dir, files, _worker_one, npz_path)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -131,20 +124,8 @@ def npz_path(op2: Path) -> Path:
 
 
 def run_pynastran(files: list[Path], python: str) -> None:
-    todo = [f for f in files if not npz_path(f).exists()]
-    NPZ.mkdir(parents=True, exist_ok=True)
-    while todo:    # a worker killed by a file (a hard crash) loses only that file
-        proc = subprocess.run([python, __file__, "--worker", str(NPZ), *map(str, todo)], capture_output=True,
-                              text=True, check=False)
-        done = [f for f in todo if npz_path(f).exists()]
-        rest = [f for f in todo if not npz_path(f).exists()]
-        if rest:
-            np.savez_compressed(npz_path(rest[0]), error=np.array(
-                f"pyNastran process died (rc {proc.returncode}): {proc.stderr.strip().splitlines()[-1:]}"))
-            rest = rest[1:]
-        if not done and not rest:
-            break
-        todo = rest
+    """pyNastran's reading of the ``files`` not read yet, in its environment (:func:`reference_runs.run_reference`)."""
+    run_reference(files, python, __file__, NPZ, npz_path, "pyNastran")
 
 
 def rotate_to_basic(t: np.ndarray, xyz: np.ndarray, kind: str, origin: np.ndarray, beta: np.ndarray):
@@ -168,34 +149,6 @@ def rotate_to_basic(t: np.ndarray, xyz: np.ndarray, kind: str, origin: np.ndarra
     return comp @ beta
 
 
-class _Catch:
-    """Collects the log messages of hot2cold.io while a file is read."""
-
-    def __enter__(self):
-        import logging
-
-        self.lines: list[str] = []
-        catch = self
-
-        class H(logging.Handler):
-            def emit(self, record):
-                catch.lines.append(record.getMessage())
-
-        self.handler, self.logger = H(level=logging.INFO), logging.getLogger("hot2cold.io")
-        self.level = self.logger.level
-        self.logger.setLevel(logging.INFO)
-        self.logger.addHandler(self.handler)
-        return self
-
-    def __exit__(self, *exc):
-        self.logger.removeHandler(self.handler)
-        self.logger.setLevel(self.level)
-
-
-def _short(text: str, n: int = 200) -> str:
-    return text if len(text) <= n else text[:n - 3] + "..."
-
-
 def _left_out_logged(lines: list[str]) -> list[str]:
     return [line.split(": ", 1)[-1] for line in lines if "left out" in line]
 
@@ -210,7 +163,7 @@ def hot2cold_read(path: Path):
     from hot2cold.io.field import read_field
     from hot2cold.io.nastran import read_op2, read_punch
 
-    with _Catch() as catch:
+    with Caught("hot2cold.io") as catch:
         try:
             result = read_punch(str(path)) if path.suffix.lower() == ".pch" else read_op2(str(path))
         except FieldError as exc:
@@ -251,13 +204,13 @@ def compare(path: Path) -> dict:
     if left:
         row["notes"].append("hot2cold logged: " + "; ".join(left))
     if field_note:
-        row["notes"].append(_short(field_note, 240))
+        row["notes"].append(short(field_note, 240))
     if outcome == "crash":
-        row.update(outcome="crash", why=_short(message))
+        row.update(outcome="crash", why=short(message))
         return row
     if src is None:
         row.update(outcome="same" if got is not None else "refused",
-                   why="no .op2 of this run to compare with" if got is not None else _short(message))
+                   why="no .op2 of this run to compare with" if got is not None else short(message))
         if got is not None:
             row["outcome"] = "not compared"
             row["notes"].append(f"hot2cold read {len(got.node_ids)} grids")
@@ -265,12 +218,12 @@ def compare(path: Path) -> dict:
     if "error" in ref:
         row["notes"].append(f"pyNastran failed: {ref['error']}")
     if "geom_error" in ref:
-        row["notes"].append(f"pyNastran's read_op2_geom failed ({_short(str(ref['geom_error']), 120)}): "
+        row["notes"].append(f"pyNastran's read_op2_geom failed ({short(str(ref['geom_error']), 120)}): "
                             f"results read without geometry, compared as the file holds them (CD frames)")
     if "ids" not in ref:
         what = str(ref.get("last_kind", "no displacement table"))
         if outcome == "refused":
-            row.update(outcome="refused", why=_short(message))
+            row.update(outcome="refused", why=short(message))
             row["notes"].append(f"pyNastran: no static displacements ({what})")
         else:
             row.update(outcome="no displacements in pyNastran",
@@ -298,14 +251,14 @@ def compare(path: Path) -> dict:
         if not left and outcome is None:
             row["notes"].append("NOT LOGGED by hot2cold")
     if outcome == "refused" and got is None:
-        row.update(outcome="refused", why=_short(message))
+        row.update(outcome="refused", why=short(message))
         return row
     grid = gt == 1
     gids, gt_t = ids[grid], t[grid]
     h_ids = np.asarray(got.node_ids, dtype=np.int64)
     h_t = np.asarray(got.displacements, dtype=np.float64)
     if outcome == "refused":
-        row.update(outcome="refused", why=_short(message))
+        row.update(outcome="refused", why=short(message))
     if not np.array_equal(h_ids, gids):
         extra, missing = np.setdiff1d(h_ids, gids), np.setdiff1d(gids, h_ids)
         why = f"node count {len(h_ids)} vs pyNastran {len(gids)}"
@@ -374,40 +327,7 @@ def compare(path: Path) -> dict:
 # --------------------------------------------------------------------------------------------------------
 # Running, printing
 # --------------------------------------------------------------------------------------------------------
-def extract(gitdir: str) -> None:
-    listing = subprocess.run(["git", "-C", gitdir, "ls-tree", "-r", COMMIT, "models"], capture_output=True,
-                             text=True, check=True).stdout
-    for line in listing.splitlines():
-        meta, name = line.split("\t", 1)
-        if not name.lower().endswith(EXTENSIONS):
-            continue
-        target = CACHE / name
-        if target.exists():
-            continue
-        blob = subprocess.run(["git", "-C", gitdir, "cat-file", "blob", meta.split()[2]], capture_output=True,
-                              check=False)
-        if blob.returncode:
-            sys.stdout.write(f"missing in {gitdir}: {name}\n")
-            continue
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_bytes(blob.stdout)
-
-
 ORDER = ("same", "differs", "refused", "crash", "no displacements in pyNastran", "not compared")
-
-
-def show(rows: list[dict], out=sys.stdout) -> None:
-    width = max(len(r["file"]) for r in rows)
-    for r in rows:
-        out.write(f"{r['file']:<{width}}  {r['outcome']:<8}  {r['why']}\n")
-        for note in r["notes"]:
-            out.write(f"{'':<{width}}    - {note}\n")
-    out.write("\n")
-    for kind in ORDER:
-        n = sum(r["outcome"] == kind for r in rows)
-        if n:
-            out.write(f"{kind}: {n}\n")
-    out.write(f"total: {len(rows)}\n")
 
 
 def main(argv=None) -> int:
@@ -422,17 +342,17 @@ def main(argv=None) -> int:
     if args.worker:
         return worker(args.worker[0], args.worker[1:])
     if args.show:
-        show(json.loads(args.show.read_text()))
+        show(json.loads(args.show.read_text()), ORDER)
         return 0
     if args.extract:
-        extract(args.extract)
+        extract(args.extract, COMMIT, "models", lambda name: name.lower().endswith(EXTENSIONS), CACHE)
     if not MODELS.is_dir():
         sys.stderr.write(f"{MODELS} is missing: run with --extract PYNASTRAN_GITDIR first\n")
         return 2
     files = sorted(p for p in MODELS.rglob("*") if p.suffix.lower() in (".op2", ".pch") and args.only in str(p))
     run_pynastran([p for p in files if p.suffix.lower() == ".op2"], args.pynastran)
     rows = [compare(p) for p in files]
-    show(rows)
+    show(rows, ORDER)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1))
