@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -92,6 +94,16 @@ def benchmark_module(name: str):
     finally:
         sys.modules.pop(spec.name, None)
         sys.modules.pop("real_parts", None)
+
+
+def run_outside(args: list, cwd: Path, timeout: float = 900) -> str:
+    """``args`` run in ``cwd`` as a fresh shell would run them, their stdout returned (a non-zero exit fails the
+    test with its stderr): without this process's PYTHONPATH or PYTHONHOME, which would put a checkout's
+    hot2cold before the one installed where ``args`` run (the wheel's, a fresh venv's)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    done = subprocess.run([str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+    assert done.returncode == 0, f"{' '.join(map(str, args))} exited {done.returncode}:\n{done.stderr[-3000:]}"
+    return done.stdout
 
 
 @pytest.fixture(scope="module")

@@ -10,19 +10,20 @@ same poles), and build123d's own ``Box`` and ``BuildPart`` with a thermal field.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import run_outside
 
 ROOT = Path(__file__).resolve().parent.parent
 
 #: The pair of releases that share one OCP (7.8): build123d 0.10 asks for ``cadquery-ocp>=7.8,<7.9``,
 #: CadQuery 2.7 takes it.
 PINS = ("build123d==0.10.0", "cadquery==2.7.0", "ocp_gordon<0.2")
+#: Seconds each command of the test may take (the install downloads about 400 MB).
+INSTALL_TIMEOUT = 1500
 
 SCRIPT = textwrap.dedent("""
     import json, sys
@@ -64,25 +65,19 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def _run(args: list, cwd: Path) -> str:
-    """``args`` run in ``cwd`` without this process's PYTHONPATH (a checkout's hot2cold before the venv's)."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    done = subprocess.run([str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=1500, env=env)
-    assert done.returncode == 0, f"{' '.join(map(str, args))} exited {done.returncode}:\n{done.stderr[-3000:]}"
-    return done.stdout
-
-
 @pytest.mark.slow
 def test_a_build123d_part_morphs_as_its_step_file_does_and_comes_back_as_build123d(tmp_path):
     venv = tmp_path / "venv"
-    _run([sys.executable, "-m", "venv", venv], tmp_path)
+    run_outside([sys.executable, "-m", "venv", venv], tmp_path, timeout=INSTALL_TIMEOUT)
     python = venv / "bin" / "python"
-    _run([python, "-m", "pip", "install", "-q", *PINS, ROOT], tmp_path)
-    assert "site-packages" in _run([python, "-c", "import hot2cold; print(hot2cold.__file__)"], tmp_path)
+    run_outside([python, "-m", "pip", "install", "-q", *PINS, ROOT], tmp_path, timeout=INSTALL_TIMEOUT)
+    where = run_outside([python, "-c", "import hot2cold; print(hot2cold.__file__)"], tmp_path, timeout=INSTALL_TIMEOUT)
+    assert "site-packages" in where
     (tmp_path / "run.py").write_text(SCRIPT)
     samples = ROOT / "sample_parts"
-    out = json.loads(_run([python, "run.py", samples / "twisted_blade.step", samples / "twisted_blade_field.csv"],
-                          tmp_path).strip().splitlines()[-1])
+    out = json.loads(run_outside([python, "run.py", samples / "twisted_blade.step",
+                                  samples / "twisted_blade_field.csv"], tmp_path, timeout=INSTALL_TIMEOUT)
+                     .strip().splitlines()[-1])
 
     blade = out["blade"]
     assert (blade["hot_type"], blade["cold_type"], blade["hot_back"]) == ("Solid", "Solid", "Solid")

@@ -8,8 +8,6 @@ so that the test downloads nothing; not the environment's editable hot2cold, who
 from __future__ import annotations
 
 import io
-import os
-import subprocess
 import sys
 import sysconfig
 import tarfile
@@ -17,6 +15,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from conftest import run_outside
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "sample_parts"
@@ -27,21 +26,12 @@ PACKAGE_DATA = ("hot2cold/views/viewer/three.core.min.js", "hot2cold/views/viewe
                 "hot2cold/views/viewer/LICENSE.three")
 
 
-def _run(args: list, cwd: Path) -> str:
-    """``args`` run in ``cwd`` as a fresh shell would run them: without this process's PYTHONPATH or
-    PYTHONHOME, which would put a checkout's hot2cold before the installed one."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    done = subprocess.run([str(a) for a in args], cwd=cwd, capture_output=True, text=True, timeout=900, env=env)
-    assert done.returncode == 0, f"{' '.join(map(str, args))} exited {done.returncode}:\n{done.stderr[-3000:]}"
-    return done.stdout
-
-
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory) -> Path:
     """The sdist and the wheel built, checked, and the wheel installed in a fresh venv (its folder)."""
     tmp_path = tmp_path_factory.mktemp("wheel")
     dist = tmp_path / "dist"
-    _run([sys.executable, "-m", "build", "--sdist", "--wheel", "--outdir", dist, ROOT], tmp_path)
+    run_outside([sys.executable, "-m", "build", "--sdist", "--wheel", "--outdir", dist, ROOT], tmp_path)
     (wheel,), (sdist,) = list(dist.glob("*.whl")), list(dist.glob("*.tar.gz"))
     names = set(zipfile.ZipFile(wheel).namelist())
     assert set(PACKAGE_DATA) <= names and "hot2cold/cli/__init__.py" in names
@@ -54,12 +44,13 @@ def installed(tmp_path_factory) -> Path:
     assert set(PACKAGE_DATA) <= members
 
     venv = tmp_path / "venv"
-    _run([sys.executable, "-m", "venv", venv], tmp_path)
+    run_outside([sys.executable, "-m", "venv", venv], tmp_path)
     python = venv / "bin" / "python"
-    site = Path(_run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], tmp_path).strip())
+    site = Path(run_outside([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                            tmp_path).strip())
     (site / "borrowed_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    _run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-index", wheel], tmp_path)
-    where = Path(_run([python, "-c", "import hot2cold; print(hot2cold.__file__)"], tmp_path).strip())
+    run_outside([python, "-m", "pip", "install", "-q", "--no-deps", "--no-index", wheel], tmp_path)
+    where = Path(run_outside([python, "-c", "import hot2cold; print(hot2cold.__file__)"], tmp_path).strip())
     assert where.is_relative_to(venv), where
     return venv
 
@@ -67,9 +58,9 @@ def installed(tmp_path_factory) -> Path:
 @pytest.mark.slow
 def test_the_wheel_runs_the_quick_start_outside_the_checkout(installed, tmp_path):
     venv = installed
-    assert "{morph,batch}" in _run([venv / "bin" / "hot2cold", "--help"], tmp_path)
-    assert "FIELD" in _run([venv / "bin" / "hot2cold", "morph", "--help"], tmp_path).upper()
-    out = _run([venv / "bin" / "hot2cold", "morph", SAMPLES / "twisted_blade.step",
+    assert "{morph,batch}" in run_outside([venv / "bin" / "hot2cold", "--help"], tmp_path)
+    assert "FIELD" in run_outside([venv / "bin" / "hot2cold", "morph", "--help"], tmp_path).upper()
+    out = run_outside([venv / "bin" / "hot2cold", "morph", SAMPLES / "twisted_blade.step",
                 SAMPLES / "twisted_blade_field.csv", "-o", "twisted_blade_cold.step", "--report",
                 "twisted_blade_report.json"], tmp_path)
     assert out.startswith("tolerance 0.001 mm: met")
@@ -105,7 +96,7 @@ def test_the_docs_notebook_from_the_wheel_shows_the_cold_blade_at_load(installed
     executed = tmp_path / "blade.ipynb"
     script = tmp_path / "execute.py"
     script.write_text(_EXECUTE)
-    _run([installed / "bin" / "python", script, ROOT / "docs" / "examples" / "blade.ipynb", executed], tmp_path)
+    run_outside([installed / "bin" / "python", script, ROOT / "docs" / "examples" / "blade.ipynb", executed], tmp_path)
     notebook = nbformat.read(executed, as_version=4)
     shown = [o["data"]["text/html"] for cell in notebook.cells if cell.cell_type == "code"
              for o in cell.get("outputs", []) if o.get("output_type") == "execute_result"
