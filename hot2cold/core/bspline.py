@@ -74,9 +74,18 @@ class BSplineCurve:
         """Parameter range ``(knots[p], knots[n])``."""
         return float(self.knots[self.degree]), float(self.knots[self.n_poles])
 
+    @property
+    def layout(self) -> KnotLayout:
+        """The :class:`KnotLayout` of the knots, worked out on first use and kept (shared by :meth:`with_poles`)."""
+        found = self.__dict__.get("_layout")
+        if found is None:
+            found = KnotLayout(self.knots, self.degree)
+            object.__setattr__(self, "_layout", found)
+        return found
+
     def with_poles(self, poles: np.ndarray) -> "BSplineCurve":
         """The same curve (degree, knots, weights) with other poles ``(n, 3)``."""
-        return replace(self, poles=poles)
+        return _same_layout(self, replace(self, poles=poles))
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,9 +141,27 @@ class BSplineSurface:
         return (float(self.u_knots[self.u_degree]), float(self.u_knots[nu]),
                 float(self.v_knots[self.v_degree]), float(self.v_knots[nv]))
 
+    @property
+    def layouts(self) -> tuple[KnotLayout, KnotLayout]:
+        """The :class:`KnotLayout` of the u- and the v-knots, worked out on first use and kept (shared by
+        :meth:`with_poles`)."""
+        found = self.__dict__.get("_layout")
+        if found is None:
+            found = (KnotLayout(self.u_knots, self.u_degree), KnotLayout(self.v_knots, self.v_degree))
+            object.__setattr__(self, "_layout", found)
+        return found
+
     def with_poles(self, poles: np.ndarray) -> "BSplineSurface":
         """The same surface (degrees, knots, weights) with another control net ``(nu, nv, 3)``."""
-        return replace(self, poles=poles)
+        return _same_layout(self, replace(self, poles=poles))
+
+
+def _same_layout(old, new):
+    """``new`` (made from ``old`` with other poles) given ``old``'s knot layouts where they are worked out."""
+    found = old.__dict__.get("_layout")
+    if found is not None and new.poles.shape[:-1] == old.poles.shape[:-1]:
+        object.__setattr__(new, "_layout", found)
+    return new
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -178,22 +205,47 @@ def _parameters(t, lo: float, hi: float, name: str) -> np.ndarray:
     return np.clip(arr, lo, hi)
 
 
-def _spans(x: np.ndarray, knots: np.ndarray, degree: int) -> np.ndarray:
+class KnotLayout:
+    """What the basis rows of one knot vector and degree need besides the parameters, worked out once: the last
+    non-empty span ``last`` and, per degree ``d = 1 .. degree``, the factors ``factors[d]`` of the differences that
+    raise a degree-``d - 1`` row to degree ``d`` in :func:`_span_rows` (``d / (T[j+d+1] - T[j+1])`` on the knots
+    ``T`` of degree ``d``, 0 on empty spans).  A record keeps one per knot vector (:meth:`BSplineSurface.layouts`),
+    so that a morph's many evaluations of the same face do not work them out again each time."""
+
+    __slots__ = ("knots", "degree", "last", "factors")
+
+    def __init__(self, knots: np.ndarray, degree: int):
+        self.knots, self.degree = knots, degree
+        last = len(knots) - degree - 2      # the last non-empty span (before an end knot of too high a multiplicity)
+        while last > degree and knots[last] >= knots[last + 1]:
+            last -= 1
+        self.last = last
+        n = len(knots) - degree - 1
+        self.factors: dict[int, np.ndarray] = {}
+        for d in range(1, degree + 1):
+            td = knots[degree - d:len(knots) - (degree - d)]
+            nd = n - degree + d             # number of basis functions of degree d on td
+            den = td[d + 1:nd + d] - td[1:nd]   # (nd - 1,): T[j+d+1] - T[j+1]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self.factors[d] = np.where(den > 0, d / np.where(den > 0, den, 1.0), 0.0)
+
+
+def _spans(x: np.ndarray, knots: np.ndarray, degree: int, last: int | None = None) -> np.ndarray:
     """The knot span ``s (m,)`` of each parameter ``x (m,)`` (in the domain): ``knots[s] <= x < knots[s + 1]``,
-    the span to the right at an inner knot, the last non-empty span at the domain's end (as
-    ``scipy.interpolate.BSpline.design_matrix`` picks them)."""
-    last = len(knots) - degree - 2          # the last non-empty span (before an end knot of too high a multiplicity)
-    while last > degree and knots[last] >= knots[last + 1]:
-        last -= 1
+    the span to the right at an inner knot, the last non-empty span (``last``, :class:`KnotLayout`) at the
+    domain's end (as ``scipy.interpolate.BSpline.design_matrix`` picks them)."""
+    if last is None:
+        last = KnotLayout(knots, degree).last
     return np.minimum(np.maximum(np.searchsorted(knots, x, side="right") - 1, degree), last)
 
 
-def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int) -> tuple[np.ndarray, list[np.ndarray]]:
+def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int, last: int | None = None
+              ) -> tuple[np.ndarray, list[np.ndarray]]:
     """The non-zero B-splines of every degree ``lowest .. degree`` at ``x (m,)`` by the Cox-de Boor triangle
     (The NURBS Book, A2.2), vectorised over ``x`` and, degree by degree, over the functions: the span ``s (m,)``
     of each parameter and, per degree ``d``, the values ``(m, d + 1)`` of the degree-``d`` B-splines
-    ``s - d .. s`` on ``knots``."""
-    s = _spans(x, knots, degree)
+    ``s - d .. s`` on ``knots`` (``last``: :func:`_spans`)."""
+    s = _spans(x, knots, degree, last)
     steps = np.arange(1, degree + 1)
     left = x[:, None] - knots[s[:, None] + 1 - steps]             # (m, degree): x - knots[s + 1 - j]
     right = knots[s[:, None] + steps] - x[:, None]                # (m, degree): knots[s + j] - x
@@ -210,12 +262,14 @@ def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int) -> tup
     return s, out
 
 
-def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[np.ndarray, list[np.ndarray]]:
+def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int, layout: KnotLayout | None = None
+               ) -> tuple[np.ndarray, list[np.ndarray]]:
     """Basis values and the derivatives ``1..nu`` in fixed-width row form.
 
-    ``x`` (m,) must lie in the domain.  Returns ``start`` (m,) int, the column of the first non-zero basis
-    function of each row, and ``[vals_0, ..., vals_nu]``, each (m, degree + 1): ``vals_k[r, a]`` is the
-    ``k``-th derivative of basis function ``start[r] + a`` at ``x[r]``.
+    ``x`` (m,) must lie in the domain; ``layout`` is ``KnotLayout(knots, degree)`` where the caller keeps one.
+    Returns ``start`` (m,) int, the column of the first non-zero basis function of each row, and ``[vals_0, ...,
+    vals_nu]``, each (m, degree + 1): ``vals_k[r, a]`` is the ``k``-th derivative of basis function
+    ``start[r] + a`` at ``x[r]``.
 
     Derivatives use the knot-difference identity: the ``k``-th derivative of a degree-``p`` spline on knots
     ``t`` is a degree-``(p - k)`` spline on ``t[k:-k]``, whose coefficients are repeated scaled differences
@@ -225,10 +279,11 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[
     """
     p = degree
     m = x.shape[0]
-    n = len(knots) - p - 1
     if m == 0:
         return np.zeros(0, dtype=np.int64), [np.zeros((0, p + 1)) for _ in range(nu + 1)]
-    span, lower = _triangle(x, knots, p, max(p - nu, 0))          # lower[i]: degree max(p - nu, 0) + i
+    if layout is None:
+        layout = KnotLayout(knots, degree)
+    span, lower = _triangle(x, knots, p, max(p - nu, 0), layout.last)   # lower[i]: degree max(p - nu, 0) + i
     start = span - p
     out = []
     for k in range(nu + 1):
@@ -239,13 +294,8 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int) -> tuple[
         vals = lower[d0 - max(p - nu, 0)]
         # Raise the degree-d0 row back to the degree-p index space: multiply by Diff_d, d = d0+1 .. p.
         for d in range(d0 + 1, p + 1):
-            td = knots[p - d:len(knots) - (p - d)]
-            nd = n - p + d  # number of basis functions of degree d on td
-            den = td[d + 1:nd + d] - td[1:nd]  # (nd - 1,): T[j+d+1] - T[j+1]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                coef = np.where(den > 0, d / np.where(den > 0, den, 1.0), 0.0)
             w = vals.shape[1]
-            pv = vals * coef[start[:, None] + np.arange(w)]
+            pv = vals * layout.factors[d][start[:, None] + np.arange(w)]
             new = np.zeros((m, w + 1))
             new[:, :w] -= pv
             new[:, 1:] += pv
@@ -282,7 +332,7 @@ def _to_csr(start: np.ndarray, vals: np.ndarray, n_cols: int) -> _sparse.csr_arr
 def _curve_rows(curve: BSplineCurve, t, nu: int) -> tuple[np.ndarray, list[np.ndarray]]:
     lo, hi = curve.domain
     x = _parameters(t, lo, hi, "t")
-    start, vals = _span_rows(x, curve.knots, curve.degree, nu)
+    start, vals = _span_rows(x, curve.knots, curve.degree, nu, curve.layout)
     if curve.weights is not None:
         vals = _rationalise(vals, curve.weights[start[:, None] + np.arange(curve.degree + 1)])
     return start, vals
@@ -354,8 +404,9 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
     nv = surface.shape[1]
-    su, bu = _span_rows(uu, surface.u_knots, p, nu)
-    sv, bv = _span_rows(vv, surface.v_knots, q, nu)
+    lu, lv = surface.layouts
+    su, bu = _span_rows(uu, surface.u_knots, p, nu, lu)
+    sv, bv = _span_rows(vv, surface.v_knots, q, nu, lv)
     m = uu.shape[0]
     cols = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv
             + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
@@ -695,8 +746,9 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     uu, vv = _surface_parameters(surface, u, v)
     p, q = surface.u_degree, surface.v_degree
     nu_, nv_ = surface.shape
-    su, bu = _span_rows(uu, surface.u_knots, p, 2)
-    sv, bv = _span_rows(vv, surface.v_knots, q, 2)
+    lu, lv = surface.layouts
+    su, bu = _span_rows(uu, surface.u_knots, p, 2, lu)
+    sv, bv = _span_rows(vv, surface.v_knots, q, 2, lv)
     w = surface.weights
     homo = surface.poles if w is None else np.concatenate([surface.poles * w[..., None], w[..., None]], axis=2)
     width = homo.shape[2]
@@ -777,8 +829,9 @@ def _grid_homogeneous(surface: BSplineSurface, u, v, nu: int) -> dict[tuple[int,
     u0, u1, v0, v1 = surface.domain
     uu, vv = _parameters(u, u0, u1, "u"), _parameters(v, v0, v1, "v")
     n_u, n_v = surface.shape
-    su, bu = _span_rows(uu, surface.u_knots, surface.u_degree, nu)
-    sv, bv = _span_rows(vv, surface.v_knots, surface.v_degree, nu)
+    lu, lv = surface.layouts
+    su, bu = _span_rows(uu, surface.u_knots, surface.u_degree, nu, lu)
+    sv, bv = _span_rows(vv, surface.v_knots, surface.v_degree, nu, lv)
     homo = _homogeneous(surface.poles, surface.weights).reshape(n_u, n_v * 4)
     out = {}
     for a in range(nu + 1):

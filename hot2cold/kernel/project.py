@@ -29,8 +29,8 @@ from ..core.domain import DomainRaster, Trim
 
 #: Fewest and most cells along each side of a face's domain raster.
 RASTER_CELLS = (256, 2048)
-#: A face's raster is built when it is first asked about this many points at once (building it costs about
-#: as much as classifying them one by one).
+#: A face's raster is built once it has been asked about this many points in all (building it costs about
+#: as much as classifying them one by one; a morph asks most faces many times about a few points each).
 RASTER_WORTH = 1_000
 
 
@@ -70,6 +70,7 @@ class Projector:
         self._class: dict[int, BRepTopAdaptor_FClass2d] = {}
         self._raster: dict[int, DomainRaster] = {}
         self._curve: dict[int, tuple] = {}
+        self._asked: dict[int, int] = {}
 
     def _surface_projector(self, k: int) -> GeomAPI_ProjectPointOnSurf:
         proj = self._surf.get(k)
@@ -121,10 +122,12 @@ class Projector:
         """State ``(n,)`` int of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: Trim.INSIDE,
         Trim.ON_BOUNDARY or Trim.OUTSIDE.
 
-        The raster decides points away from the boundary; ``BRepTopAdaptor_FClass2d`` the rest.
+        The raster decides points away from the boundary; ``BRepTopAdaptor_FClass2d`` the rest (all of them
+        until the face has been asked about ``RASTER_WORTH`` points in all).
         """
         uv = np.asarray(uv, float).reshape(-1, 2)
-        if k not in self._raster and len(uv) < RASTER_WORTH:
+        self._asked[k] = asked = self._asked.get(k, 0) + len(uv)
+        if k not in self._raster and asked < RASTER_WORTH:
             return self.classify_exactly(k, uv)
         raster = self._domain(k, len(uv)).classify(uv)
         state = np.where(raster == Trim.INSIDE, Trim.INSIDE, Trim.OUTSIDE)

@@ -29,12 +29,12 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class SolidCheck:
     """Checks of one solid: ``valid`` (BRepCheck_Analyzer), ``free_edges`` (edges used by one face only),
-    ``faces`` count and ``volume`` in mm^3."""
+    ``faces`` count and ``volume`` in mm^3 (None where not asked for: :func:`check_solids`)."""
 
     valid: bool
     free_edges: int
     faces: int
-    volume: float
+    volume: float | None
 
     @property
     def closed(self) -> bool:
@@ -81,12 +81,15 @@ def face_areas(faces) -> np.ndarray:
     return areas
 
 
-def check_solids(shape) -> list[SolidCheck]:
-    """One :class:`SolidCheck` per solid of ``shape``."""
+def check_solids(shape, volumes: bool = True) -> list[SolidCheck]:
+    """One :class:`SolidCheck` per solid of ``shape``; without ``volumes``, their volumes are not integrated
+    (None): on a part of many spline faces the integration to :data:`GPROP_EPS` takes seconds, and a check of
+    validity alone does not need it."""
     out = []
     for solid in shape_map(shape, TopAbs_SOLID):
         out.append(SolidCheck(valid=bool(BRepCheck_Analyzer(solid).IsValid()), free_edges=free_edges(solid),
-                              faces=len(shape_map(solid, TopAbs_FACE)), volume=volume(solid)))
+                              faces=len(shape_map(solid, TopAbs_FACE)),
+                              volume=volume(solid) if volumes else None))
     return out
 
 
