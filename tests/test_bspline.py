@@ -8,9 +8,10 @@ import pytest
 import scipy.sparse
 from OCP.gp import gp_Pnt, gp_Vec
 
-from hot2cold.core.bspline import (BSplineCurve, BSplineSurface, _span_rows, curve_basis, curve_derivative_basis,
-                              evaluate_curve, evaluate_surface, surface_basis, surface_derivative_bases,
-                              surface_derivatives, surface_first_jet, surface_normals)
+from hot2cold.core.bspline import (BasisMemo, BSplineCurve, BSplineSurface, _span_rows, curve_basis,
+                                   curve_derivative_basis, evaluate_curve, evaluate_surface, refine_surface,
+                                   surface_basis, surface_derivative_bases, surface_derivatives, surface_first_jet,
+                                   surface_normals)
 from hot2cold.kernel.convert import (curve_to_record, record_to_curve, record_to_surface,
                                      surface_to_record)
 
@@ -408,3 +409,55 @@ def test_basis_rows_match_scipy_derivatives(degree):
                     scale = max(1.0, float(np.abs(expected[where]).max(initial=0.0)))
                     assert np.allclose(dense[where, i], np.nan_to_num(expected[where]), atol=1e-9 * scale), \
                         (degree, nu, k, i)
+
+
+# --------------------------------------------------------------------------------- remembered basis rows
+@pytest.mark.parametrize("rational", [False, True])
+def test_remembered_rows_are_the_rows(rational):
+    """A surface that remembers its basis rows (BasisMemo) gives the same points, derivatives, normals and
+    bases as one that does not, on the first request and on the same request again (served from the memo),
+    and so do the records made from it with other poles and refined knots."""
+    rng = np.random.default_rng(5)
+    plain = random_surface(rng, 3, 2, rational)
+    kept = BSplineSurface(plain.poles, plain.u_knots, plain.v_knots, 3, 2, plain.weights)
+    memo = BasisMemo()
+    kept.remember(memo)
+    u, v = surface_params(rng, plain)
+    moved = rng.normal(size=plain.poles.shape)
+    for a, b in ((plain, kept), (plain.with_poles(moved), kept.with_poles(moved)),
+                 (refine_surface(plain, 0, [1.234]), refine_surface(kept, 0, [1.234]))):
+        for _ in range(2):
+            assert np.array_equal(evaluate_surface(a, u, v), evaluate_surface(b, u, v))
+            for x, y in zip(surface_first_jet(a, u, v), surface_first_jet(b, u, v)):
+                assert np.array_equal(x, y)
+            assert np.array_equal(surface_normals(a, u, v), surface_normals(b, u, v), equal_nan=True)
+            for x, y in zip(surface_derivative_bases(a, u, v), surface_derivative_bases(b, u, v)):
+                assert np.array_equal(x.toarray(), y.toarray())
+    assert memo._rows, "nothing was remembered"
+
+
+def test_remembered_rows_are_bounded_private_and_not_pickled():
+    """The memo keeps at most its budget (least recently used out first) and no request larger than
+    max_rows; a basis handed out from it may be scaled in place without changing what it keeps; a pickled
+    surface comes back without it."""
+    import pickle
+
+    rng = np.random.default_rng(6)
+    s = random_surface(rng, 3, 3, True)
+    memo = BasisMemo(budget=40_000, max_rows=100)
+    s.remember(memo)
+    u0, u1, v0, v1 = s.domain
+    for m in (30, 30, 30, 30, 150):
+        surface_first_jet(s, rng.uniform(u0, u1, m), rng.uniform(v0, v1, m))
+        assert memo._bytes <= memo.budget
+    assert all(len(entry[1]) <= 100 for entry in memo._rows.values())
+    u, v = rng.uniform(u0, u1, 20), rng.uniform(v0, v1, 20)
+    before = surface_basis(s, u, v).toarray()
+    basis = surface_basis(s, u, v)                  # served from the memo
+    basis.data *= 2.0
+    assert np.array_equal(surface_basis(s, u, v).toarray(), before)
+    back = pickle.loads(pickle.dumps(s))
+    assert back.__dict__.get("_memo") is None
+    assert np.array_equal(evaluate_surface(back, u, v), evaluate_surface(s, u, v))
+    memo.clear()
+    assert not memo._rows and memo._bytes == 0

@@ -15,6 +15,7 @@ Conventions
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, replace
 from math import comb as _comb
 
@@ -155,13 +156,85 @@ class BSplineSurface:
         """The same surface (degrees, knots, weights) with another control net ``(nu, nv, 3)``."""
         return _same_layout(self, replace(self, poles=poles))
 
+    def remember(self, memo: BasisMemo | None) -> None:
+        """Keep the basis rows asked of this surface in ``memo`` (None: keep none), and so those of the surfaces
+        made from it (:meth:`with_poles`, :func:`refine_surface`)."""
+        object.__setattr__(self, "_memo", memo)
+
+    def __getstate__(self) -> dict:
+        """Pickled without its :class:`BasisMemo` (the process that unpickles it keeps its own, or none)."""
+        return {k: v for k, v in self.__dict__.items() if k != "_memo"}
+
 
 def _same_layout(old, new):
-    """``new`` (made from ``old`` with other poles) given ``old``'s knot layouts where they are worked out."""
+    """``new`` (made from ``old`` with other poles) given ``old``'s knot layouts where they are worked out, and
+    its :class:`BasisMemo`."""
     found = old.__dict__.get("_layout")
     if found is not None and new.poles.shape[:-1] == old.poles.shape[:-1]:
         object.__setattr__(new, "_layout", found)
+    if old.__dict__.get("_memo") is not None:
+        object.__setattr__(new, "_memo", old.__dict__["_memo"])
     return new
+
+
+#: What a :class:`BasisMemo` holds at the most (bytes), and the most rows of one request it keeps.
+MEMO_BYTES, MEMO_ROWS = 64 * 2 ** 20, 4096
+
+
+class BasisMemo:
+    """The basis rows asked of a morph's surfaces, kept for when the same rows are asked again.
+
+    A morph asks the same rows many times: the hot faces' normals at the same edge samples in every round of
+    G1, a face's grid in every refinement round and every check, a morphed face (a record of the same knots,
+    :meth:`BSplineSurface.with_poles`) at its hot face's parameters.  Requests of up to ``max_rows``
+    parameters are kept, keyed by the surface's knot layouts (:class:`KnotLayout`, one object per record and
+    the records made from it with other poles: the same knots, degrees and weights) and the parameters; the
+    least recently used go first beyond ``budget`` bytes.  The arrays kept are read-only.  Thread-safe: the
+    stages work on faces in threads."""
+
+    def __init__(self, budget: int = MEMO_BYTES, max_rows: int = MEMO_ROWS):
+        self.budget, self.max_rows = budget, max_rows
+        self._rows: dict[tuple, tuple[int, np.ndarray, list[np.ndarray]]] = {}
+        self._bytes = 0
+        self._lock = threading.Lock()
+
+    def get(self, key: tuple, nu: int) -> tuple[np.ndarray, list[np.ndarray]] | None:
+        """The rows ``(cols, vals)`` of :func:`_surface_rows` up to derivatives of order ``nu`` kept under
+        ``key``, or None."""
+        with self._lock:
+            found = self._rows.pop(key, None)
+            if found is None:
+                return None
+            self._rows[key] = found                                     # the most recently used last
+        have, cols, vals = found
+        return (cols, vals[:_ROW_SETS[nu]]) if have >= nu else None
+
+    def put(self, key: tuple, nu: int, cols: np.ndarray, vals: list[np.ndarray]) -> None:
+        """Keep the rows ``(cols, vals)`` up to derivatives of order ``nu`` under ``key`` (made read-only)."""
+        for a in (cols, *vals):
+            a.flags.writeable = False
+        with self._lock:
+            old = self._rows.pop(key, None)
+            if old is not None:
+                self._bytes -= _size(old)
+            self._rows[key] = (nu, cols, vals)
+            self._bytes += _size(self._rows[key])
+            while self._bytes > self.budget and self._rows:
+                self._bytes -= _size(self._rows.pop(next(iter(self._rows))))    # the least recently used
+
+    def clear(self) -> None:
+        """Forget every row kept."""
+        with self._lock:
+            self._rows.clear()
+            self._bytes = 0
+
+
+def _size(entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:
+    return entry[1].nbytes + sum(v.nbytes for v in entry[2])
+
+
+#: The number of value arrays :func:`_surface_rows` gives for derivatives up to order 0, 1, 2.
+_ROW_SETS = (1, 3, 6)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -402,9 +475,17 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     and vv-derivatives.
     """
     uu, vv = _surface_parameters(surface, u, v)
+    lu, lv = surface.layouts
+    memo = surface.__dict__.get("_memo")
+    if memo is not None and len(uu) > memo.max_rows:
+        memo = None
+    if memo is not None:
+        key = (lu, lv, uu.tobytes(), vv.tobytes())
+        found = memo.get(key, nu)
+        if found is not None:
+            return found
     p, q = surface.u_degree, surface.v_degree
     nv = surface.shape[1]
-    lu, lv = surface.layouts
     su, bu = _span_rows(uu, surface.u_knots, p, nu, lu)
     sv, bv = _span_rows(vv, surface.v_knots, q, nu, lv)
     m = uu.shape[0]
@@ -432,13 +513,19 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
                   (a[4] - w[1] * r[2] - w[2] * r[1] - w[4] * r[0]) / w[0],
                   (a[5] - 2.0 * w[2] * r[2] - w[5] * r[0]) / w[0]]
         vals = r
+    if memo is not None:
+        memo.put(key, nu, cols, vals)
     return cols, vals
 
 
 def _cols_to_csr(cols: np.ndarray, vals: np.ndarray, n_cols: int) -> _sparse.csr_array:
+    """The fixed-width rows ``vals (m, w)`` in the columns ``cols (m, w)`` as an ``(m, n_cols)`` csr_array of its
+    own (rows kept in a :class:`BasisMemo` are read-only and copied: a caller may scale a basis in place)."""
     m, w = vals.shape
     indptr = np.arange(0, m * w + 1, w, dtype=np.int64)
-    return _sparse.csr_array((vals.ravel(), cols.ravel(), indptr), shape=(m, n_cols))
+    data = vals.ravel() if vals.flags.writeable else vals.ravel().copy()
+    indices = cols.ravel() if cols.flags.writeable else cols.ravel().copy()
+    return _sparse.csr_array((data, indices, indptr), shape=(m, n_cols))
 
 
 def surface_basis(surface: BSplineSurface, u, v) -> _sparse.csr_array:
@@ -701,8 +788,11 @@ def refine_surface(surface: BSplineSurface, axis: int, inserted=(), degree: int 
     w = homo[..., 3]
     poles, weights = homo[..., :3] / w[..., None], (None if surface.weights is None else w)
     if axis == 0:
-        return BSplineSurface(poles, knots, surface.v_knots, new_degree, surface.v_degree, weights)
-    return BSplineSurface(poles, surface.u_knots, knots, surface.u_degree, new_degree, weights)
+        out = BSplineSurface(poles, knots, surface.v_knots, new_degree, surface.v_degree, weights)
+    else:
+        out = BSplineSurface(poles, surface.u_knots, knots, surface.u_degree, new_degree, weights)
+    out.remember(surface.__dict__.get("_memo"))
+    return out
 
 
 def refine_curve(curve: BSplineCurve, inserted=(), degree: int | None = None) -> BSplineCurve:

@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..core.bspline import BasisMemo
 from ..core.localfit import scatter
 from ..core.model import Classification, Part, Role
 from ..io.field import DisplacementField, as_field
@@ -424,7 +425,9 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     hot_checks = check_solids(part.kernel.hot)
     check_hot(part, hot_checks)
     stages.lap("load")
-
+    memo = BasisMemo()         # the basis rows asked of the faces, for when they are asked again (bounded)
+    for face in part.faces:
+        face.surface.remember(memo)
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     stages.begin("classify", len(field))
     classified = _classify(part, field, settings, invert)
@@ -453,4 +456,6 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     cold = _rebuild_and_check(context, fits, classified, hot_checks, grids, stages)
     about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
              "inversion": None if inversion is None else asdict(inversion)}
-    return replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))
+    result = replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))
+    memo.clear()               # the result's surfaces keep it: nothing held past the morph
+    return result
