@@ -178,7 +178,7 @@ def _same_layout(old, new):
 
 
 #: What a :class:`BasisMemo` holds at the most (bytes), and the most rows of one request it keeps.
-MEMO_BYTES, MEMO_ROWS = 64 * 2 ** 20, 4096
+MEMO_BYTES, MEMO_ROWS = 32 * 2 ** 20, 512
 
 
 class BasisMemo:
@@ -216,11 +216,12 @@ class BasisMemo:
         with self._lock:
             old = self._rows.pop(key, None)
             if old is not None:
-                self._bytes -= _size(old)
+                self._bytes -= _size(key, old)
             self._rows[key] = (nu, cols, vals)
-            self._bytes += _size(self._rows[key])
+            self._bytes += _size(key, self._rows[key])
             while self._bytes > self.budget and self._rows:
-                self._bytes -= _size(self._rows.pop(next(iter(self._rows))))    # the least recently used
+                oldest = next(iter(self._rows))                             # the least recently used
+                self._bytes -= _size(oldest, self._rows.pop(oldest))
 
     def clear(self) -> None:
         """Forget every row kept."""
@@ -229,8 +230,9 @@ class BasisMemo:
             self._bytes = 0
 
 
-def _size(entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:
-    return entry[1].nbytes + sum(v.nbytes for v in entry[2])
+def _size(key: tuple, entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:
+    """The bytes of one entry: its parameters (the key) and its rows."""
+    return len(key[-2]) + len(key[-1]) + entry[1].nbytes + sum(v.nbytes for v in entry[2])
 
 
 #: The number of value arrays :func:`_surface_rows` gives for derivatives up to order 0, 1, 2.
