@@ -225,7 +225,9 @@ def carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEs
     if not apart.any():
         return disp
     out = np.array(disp, float)
-    out[apart] += estimator(to[apart]) - estimator(at[apart])
+    n = int(apart.sum())
+    both = estimator(np.concatenate([to[apart], at[apart]]))        # one estimate for both ends (a call's cost)
+    out[apart] += both[:n] - both[n:]
     return out
 
 

@@ -337,20 +337,19 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
     ``CHECK_SPACING`` x the part's diagonal apart, at least ``degree + 1`` per knot span, on edges whose own
     nodes are fewer than ``EDGE_REDUNDANCY`` times their poles, kept within ``GRID_REACH`` node spacings of
     the nodes of the edge, its faces and its vertices (the estimate over every node, ``estimator``, is
-    informed there); none on the others and on degenerate edges."""
+    informed there); none on the others and on degenerate edges.  The estimate is asked once for every edge's
+    points and the nodes next to them (a call's cost is mostly its own on a part of many edges)."""
     spacing = CHECK_SPACING * part.diagonal
-    grids = []
     empty = EdgeGrid(np.zeros(0), np.zeros((0, 3)), np.zeros(0))
+    found: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}     # edge -> t, hot points, closest nodes
     for edge in part.edges:
         own = classification.nodes_of(Role.EDGE, edge.index)
         if edge.degenerate or len(own) >= EDGE_REDUNDANCY * edge.curve.n_poles:
-            grids.append(empty)
             continue
         nodes = np.concatenate([own] + [classification.nodes_of(Role.FACE, k) for k in edge.faces]
                                + [classification.nodes_of(Role.VERTEX, v) for v in edge.vertices])
         reach = GRID_REACH * classification.spacing(nodes)
         if not len(nodes) or not np.isfinite(reach):
-            grids.append(empty)
             continue
         curve = edge.curve
         breaks = knot_breaks(curve.knots, curve.degree)
@@ -361,16 +360,19 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
         hot = evaluate_curve(curve, t)
         tree = kd_tree(classification.foot[nodes])
         near = tree.query(hot, distance_upper_bound=reach)[0] < np.inf
-        if not near.any():
-            grids.append(empty)
-            continue
-        t, hot = t[near], hot[near]
-        closest = nodes[tree.query(hot, k=min(_SLACK_NODES, len(nodes)))[1].reshape(len(t), -1)]
-        asked = np.unique(closest)
-        misses = np.zeros(len(classification.role))
-        misses[asked] = np.linalg.norm(estimator(classification.foot[asked]) - field.displacements[asked], axis=1)
-        grids.append(EdgeGrid(t, hot + estimator(hot), misses[closest].max(axis=1)))
-    return grids
+        if near.any():
+            t, hot = t[near], hot[near]
+            found[edge.index] = (t, hot, nodes[tree.query(hot, k=min(_SLACK_NODES, len(nodes)))[1].reshape(len(t), -1)])
+    if not found:
+        return [empty] * len(part.edges)
+    asked = np.unique(np.concatenate([closest.ravel() for _, _, closest in found.values()]))
+    estimate = estimator(np.concatenate([classification.foot[asked]] + [hot for _, hot, _ in found.values()]))
+    misses = np.zeros(len(classification.role))
+    misses[asked] = np.linalg.norm(estimate[:len(asked)] - field.displacements[asked], axis=1)
+    at = np.cumsum([len(asked)] + [len(t) for t, _, _ in found.values()])
+    moved = dict(zip(found, np.split(estimate, at[:-1])[1:]))
+    return [EdgeGrid(found[e][0], found[e][1] + moved[e], misses[found[e][2]].max(axis=1)) if e in found else empty
+            for e in range(len(part.edges))]
 
 
 def face_grid(face, spacing: float, projector: Projector) -> np.ndarray:
