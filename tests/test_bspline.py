@@ -459,5 +459,7 @@ def test_remembered_rows_are_bounded_private_and_not_pickled():
     back = pickle.loads(pickle.dumps(s))
     assert back.__dict__.get("_memo") is None
     assert np.array_equal(evaluate_surface(back, u, v), evaluate_surface(s, u, v))
-    memo.clear()
+    memo.close()
+    assert not memo._rows and memo._bytes == 0
+    surface_first_jet(s, u, v)                      # a closed memo keeps nothing more
     assert not memo._rows and memo._bytes == 0

@@ -211,6 +211,8 @@ class BasisMemo:
 
     def put(self, key: tuple, nu: int, cols: np.ndarray, vals: list[np.ndarray]) -> None:
         """Keep the rows ``(cols, vals)`` up to derivatives of order ``nu`` under ``key`` (made read-only)."""
+        if self.budget <= 0:
+            return
         for a in (cols, *vals):
             a.flags.writeable = False
         with self._lock:
@@ -223,11 +225,12 @@ class BasisMemo:
                 oldest = next(iter(self._rows))                             # the least recently used
                 self._bytes -= _size(oldest, self._rows.pop(oldest))
 
-    def clear(self) -> None:
-        """Forget every row kept."""
+    def close(self) -> None:
+        """Forget every row kept and keep none from now on (the surfaces of a finished morph still hold it)."""
         with self._lock:
             self._rows.clear()
             self._bytes = 0
+            self.budget = 0
 
 
 def _size(key: tuple, entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:

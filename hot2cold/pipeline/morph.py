@@ -428,6 +428,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     memo = BasisMemo()         # the basis rows asked of the faces, for when they are asked again (bounded)
     for face in part.faces:
         face.surface.remember(memo)
+
     # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
     stages.begin("classify", len(field))
     classified = _classify(part, field, settings, invert)
@@ -457,5 +458,5 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
              "inversion": None if inversion is None else asdict(inversion)}
     result = replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))
-    memo.clear()               # the result's surfaces keep it: nothing held past the morph
+    memo.close()               # the result's surfaces hold it: nothing kept past the morph
     return result
