@@ -219,7 +219,7 @@ class BasisMemo:
             old = self._rows.pop(key, None)
             if old is not None:
                 self._bytes -= _size(key, old)
-            self._rows[key] = (nu, cols, vals)
+            self._rows[key] = (nu, cols, list(vals))     # its own list: the caller's may change
             self._bytes += _size(key, self._rows[key])
             while self._bytes > self.budget and self._rows:
                 oldest = next(iter(self._rows))                             # the least recently used
@@ -308,16 +308,14 @@ class KnotLayout:
                 self.factors[d] = np.where(den > 0, d / np.where(den > 0, den, 1.0), 0.0)
 
 
-def _spans(x: np.ndarray, knots: np.ndarray, degree: int, last: int | None = None) -> np.ndarray:
+def _spans(x: np.ndarray, knots: np.ndarray, degree: int, last: int) -> np.ndarray:
     """The knot span ``s (m,)`` of each parameter ``x (m,)`` (in the domain): ``knots[s] <= x < knots[s + 1]``,
     the span to the right at an inner knot, the last non-empty span (``last``, :class:`KnotLayout`) at the
     domain's end (as ``scipy.interpolate.BSpline.design_matrix`` picks them)."""
-    if last is None:
-        last = KnotLayout(knots, degree).last
     return np.minimum(np.maximum(np.searchsorted(knots, x, side="right") - 1, degree), last)
 
 
-def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int, last: int | None = None
+def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int, last: int
               ) -> tuple[np.ndarray, list[np.ndarray]]:
     """The non-zero B-splines of every degree ``lowest .. degree`` at ``x (m,)`` by the Cox-de Boor triangle
     (The NURBS Book, A2.2), vectorised over ``x`` and, degree by degree, over the functions: the span ``s (m,)``

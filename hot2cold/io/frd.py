@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import logging
 import operator
-import re
 import os
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
