@@ -28,22 +28,22 @@ from OCP.TopoDS import TopoDS
 from ..core.domain import DomainRaster, Trim
 
 #: Fewest and most cells along each side of a face's domain raster.
-RASTER_CELLS = (256, 2048)
+RASTER_CELLS = (64, 2048)
 #: A face's raster is built once it has been asked about this many points in all (building it costs about
 #: as much as classifying them one by one; a morph asks most faces many times about a few points each).
-RASTER_WORTH = 1_000
+RASTER_WORTH = 200
 
 
-def _pcurve_polylines(face, box: np.ndarray, cells: int) -> list[np.ndarray]:
+def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Every edge use's pcurve on ``face`` as a polyline ``(m, 2)`` whose segments are at most a raster cell
-    long (``cells`` cells across ``box``)."""
+    long (``cells`` cells across ``box``), and the pcurve at each segment's middle parameter ``(m - 1, 2)``."""
     cell = np.array([(box[1] - box[0]) / cells, (box[3] - box[2]) / cells])
-    out = []
+    lines, middles = [], []
     explorer = TopExp_Explorer(face, TopAbs_EDGE)
     while explorer.More():
         curve = BRepAdaptor_Curve2d(TopoDS.Edge_s(explorer.Current()), face)
         first, last = curve.FirstParameter(), curve.LastParameter()
-        n = 65
+        n = 17
         while True:
             t = np.linspace(first, last, n)
             pts = np.array([(q.X(), q.Y()) for q in map(curve.Value, t)])
@@ -51,9 +51,10 @@ def _pcurve_polylines(face, box: np.ndarray, cells: int) -> list[np.ndarray]:
             if longest <= 1.0 or n > 200_000:
                 break
             n = int(n * min(8.0, longest + 1.0)) + 1
-        out.append(pts)
+        lines.append(pts)
+        middles.append(np.array([(q.X(), q.Y()) for q in map(curve.Value, 0.5 * (t[:-1] + t[1:]))]).reshape(-1, 2))
         explorer.Next()
-    return out
+    return lines, middles
 
 
 class Projector:
@@ -114,7 +115,8 @@ class Projector:
         if raster is None or raster.state.shape[0] < cells:
             face = self._faces[k]
             box = np.array(BRepTools.UVBounds_s(face))
-            raster = DomainRaster.build(_pcurve_polylines(face, box, cells), box, cells)
+            lines, middles = _pcurve_polylines(face, box, cells)
+            raster = DomainRaster.build(lines, box, cells, middles, self._tol)
             self._raster[k] = raster
         return raster
 
@@ -129,9 +131,8 @@ class Projector:
         self._asked[k] = asked = self._asked.get(k, 0) + len(uv)
         if k not in self._raster and asked < RASTER_WORTH:
             return self.classify_exactly(k, uv)
-        raster = self._domain(k, len(uv)).classify(uv)
-        state = np.where(raster == Trim.INSIDE, Trim.INSIDE, Trim.OUTSIDE)
-        unsure = np.flatnonzero(raster == Trim.UNSURE)
+        state = self._domain(k, len(uv)).classify(uv).astype(int)
+        unsure = np.flatnonzero(state == Trim.UNSURE)
         if len(unsure):
             state[unsure] = self.classify_exactly(k, uv[unsure])
         return state
