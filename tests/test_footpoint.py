@@ -89,27 +89,103 @@ def test_newton_checks_its_input():
         project_to_surface(surface, np.zeros((4, 3)), np.zeros((3, 2)))
 
 
-def test_raster_of_a_square_with_a_hole():
-    """Pure numpy: the unit square with a circular hole; decided cells agree with the geometry, and every
-    point within a cell of the boundary is UNSURE."""
+def _square_with_hole(n_hole: int = 2001):
+    """The unit square and a hole of radius 0.2 at its middle: the polylines, and the hole's circle at each
+    segment's middle parameter."""
     square = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], float)
-    angle = np.linspace(0, 2 * np.pi, 2001)
-    hole = 0.5 + 0.2 * np.column_stack([np.cos(angle), np.sin(angle)])
-    raster = DomainRaster.build([square, hole[::-1]], (0, 1, 0, 1), n=256)
-    rng = np.random.default_rng(3)
-    uv = rng.uniform(-0.05, 1.05, (200_000, 2))
-    state = raster.classify(uv)
+    angle = np.linspace(0, 2 * np.pi, n_hole)[::-1]
+    circle = lambda t: 0.5 + 0.2 * np.column_stack([np.cos(t), np.sin(t)])      # noqa: E731
+    middles = [0.5 * (square[:-1] + square[1:]), circle(0.5 * (angle[:-1] + angle[1:]))]
+    return [square, circle(angle)], middles
+
+
+def _distance_to_square_with_hole(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Truly inside (m,) bool, and the distance (m,) to the boundary of the square with the hole."""
     radius = np.linalg.norm(uv - 0.5, axis=1)
-    truly_inside = np.all((uv > 0) & (uv < 1), axis=1) & (radius > 0.2)
-    decided = state != Trim.UNSURE
-    assert np.all((state[decided] == Trim.INSIDE) == truly_inside[decided])
+    inside = np.all((uv > 0) & (uv < 1), axis=1) & (radius > 0.2)
     in_square = np.all((uv >= 0) & (uv <= 1), axis=1)
     to_square = np.where(in_square, np.min(np.concatenate([uv, 1 - uv], axis=1), axis=1),
                          np.linalg.norm(np.maximum(np.maximum(-uv, uv - 1), 0), axis=1))
-    to_boundary = np.minimum(np.abs(radius - 0.2), to_square)
-    assert np.all(state[to_boundary < 1.0 / 256] == Trim.UNSURE)
-    assert decided.mean() > 0.95
+    return inside, np.minimum(np.abs(radius - 0.2), to_square)
+
+
+def test_raster_of_a_square_with_a_hole():
+    """Pure numpy: the unit square with a circular hole (a 2000-gon, the circle at its segments' middles); every
+    decided point agrees with the exact geometry, the points within a cell of the boundary included, and in
+    the box only points within the margins (four times the polygon's 2.5e-7 from the circle) are left UNSURE
+    (outside the box, the border cells' points are left to the kernel)."""
+    lines, middles = _square_with_hole()
+    raster = DomainRaster.build(lines, (0, 1, 0, 1), n=256, midpoints=middles)
+    rng = np.random.default_rng(3)
+    uv = np.concatenate([rng.uniform(-0.05, 1.05, (200_000, 2)),
+                         0.5 + (0.2 + rng.uniform(-1e-3, 1e-3, (50_000, 1)))       # within a cell of the hole
+                         * np.exp(1j * rng.uniform(0, 2 * np.pi, 50_000)).view(float).reshape(-1, 2)])
+    state = raster.classify(uv)
+    inside, to_boundary = _distance_to_square_with_hole(uv)
+    decided = (state == Trim.INSIDE) | (state == Trim.OUTSIDE)
+    assert np.all((state[decided] == Trim.INSIDE) == inside[decided])
+    unsure = (state == Trim.UNSURE) & np.all((uv >= 0) & (uv <= 1), axis=1)
+    sag = 0.2 * (1 - np.cos(np.pi / 2000))
+    within = to_boundary[unsure] <= 5 * sag + 2e-6 / 256          # the chord's margin, and the chord's sag
+    assert within.sum() >= 1 and (~within).sum() <= 5               # (else: a way past a vertex within 1e-6)
+    near = (to_boundary < 1.0 / 256) & np.all((uv >= 0) & (uv <= 1), axis=1)
+    assert near.sum() > 40_000 and decided[near].mean() > 0.99
     assert np.all(raster.classify(np.array([[np.nan, 0.5], [2.0, 0.5]])) == Trim.OUTSIDE)
+
+
+def _even_odd(uv: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
+    """Brute-force even-odd rule: (m,) bool, ``uv`` (m, 2) inside the closed polylines ``lines``."""
+    a = np.concatenate([p[:-1] for p in lines])
+    b = np.concatenate([p[1:] for p in lines])
+    x, y = uv[:, :1], uv[:, 1:]
+    straddle = (a[:, 1] <= y) != (b[:, 1] <= y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return np.sum(straddle & (cross > x), axis=1) % 2 == 1
+
+
+def test_raster_of_a_polygon_decides_next_to_its_edges():
+    """A star polygon given in three open pieces (one polyline per "edge", in any orientation): the points
+    next to its edges are decided as the even-odd rule decides them, the points on its vertices and edges
+    (within half the tolerance) are ON_BOUNDARY, and a point whose way from its cell's centre passes through a
+    gap between two pieces is UNSURE."""
+    t = np.linspace(0, 2 * np.pi, 41)
+    radius = np.where(np.arange(41) % 2 == 0, 0.45, 0.2)
+    star = 0.5 + radius[:, None] * np.column_stack([np.cos(t), np.sin(t)])
+    pieces = [star[:15], star[14:30][::-1], star[29:]]
+    raster = DomainRaster.build(pieces, (0, 1, 0, 1), n=64, tolerance=1e-9)
+    rng = np.random.default_rng(4)
+    edge = rng.integers(0, 40, 100_000)
+    along = rng.uniform(0, 1, (100_000, 1))
+    uv = star[edge] + along * (star[edge + 1] - star[edge]) + rng.normal(0, 1e-3, (100_000, 2))
+    state = raster.classify(uv)
+    decided = (state == Trim.INSIDE) | (state == Trim.OUTSIDE)
+    assert decided.mean() > 0.999
+    assert np.all((state[decided] == Trim.INSIDE) == _even_odd(uv[decided], [star]))
+    on = np.concatenate([star[:40], 0.5 * (star[:40] + star[1:41]) + 1e-10])
+    assert np.all(raster.classify(on) == Trim.ON_BOUNDARY)
+    # the pieces a hair apart at the star's first vertex: a point whose way passes the gap is the kernel's
+    apart = DomainRaster.build([star[:15] + [0.0, 1e-4], star[14:30], star[29:]], (0, 1, 0, 1), n=64)
+    cell = np.floor(star[14] * 64)
+    centre = (cell + 0.5) / 64
+    beyond = centre + 1.05 * (star[14] + [0.0, 0.5e-4] - centre)      # through the middle of the gap
+    assert np.all(beyond // (1 / 64) == cell)          # (the same cell)
+    assert apart.classify(beyond[None])[0] == Trim.UNSURE
+
+
+def test_raster_leaves_the_points_within_a_margin_to_the_kernel():
+    """A boundary curve that bulges from its polyline (a half circle given by its chord and its middle point):
+    the points between chord and curve are UNSURE, not decided by the chord."""
+    chord = np.array([[0.2, 0.5], [0.8, 0.5]])
+    arc_middle = np.array([[0.5, 0.52]])
+    outer = np.array([[0.8, 0.5], [0.8, 0.1], [0.2, 0.1], [0.2, 0.5]])
+    middles = [arc_middle, 0.5 * (outer[:-1] + outer[1:])]
+    raster = DomainRaster.build([chord, outer], (0, 1, 0, 1), n=4, midpoints=middles)
+    between = np.column_stack([np.linspace(0.3, 0.7, 50), np.full(50, 0.51)])
+    assert np.all(raster.classify(between) == Trim.UNSURE)
+    assert np.all(raster.classify(np.array([[0.5, 0.6], [0.5, 0.3]])) == [Trim.OUTSIDE, Trim.INSIDE])
+    with pytest.raises(ValueError, match="midpoints"):
+        DomainRaster.build([chord, outer], (0, 1, 0, 1), n=4, midpoints=[arc_middle, arc_middle])
 
 
 @pytest.mark.heavy

@@ -8,8 +8,10 @@ foot point of some points that lie on a thin, strongly curved face (a leading ed
 not miss.
 
 Whether a parameter pair lies in a face's trimmed domain is read off a raster of the domain
-(:class:`hot2cold.core.domain.DomainRaster`) built from the face's pcurves; ``BRepTopAdaptor_FClass2d`` decides
-the points in the raster's cells next to the boundary, so the answer is the kernel's own.
+(:class:`hot2cold.core.domain.DomainRaster`) built from polylines of the face's pcurves; next to the boundary the
+polylines decide, and ``BRepTopAdaptor_FClass2d`` only the points within a margin of a pcurve (the polyline's
+distance from it, and the kernel's tolerance) or near a vertex.  Where the two differ beyond that margin it is
+the kernel's own polygon of the pcurves that is off, not the pcurves (:meth:`Projector.classify`).
 """
 from __future__ import annotations
 
@@ -30,7 +32,8 @@ from ..core.domain import DomainRaster, Trim
 #: Fewest and most cells along each side of a face's domain raster.
 RASTER_CELLS = (64, 2048)
 #: A face's raster is built once it has been asked about this many points in all (building it costs about
-#: as much as classifying them one by one; a morph asks most faces many times about a few points each).
+#: as much as the kernel's classifying them one by one next to the boundary; a morph asks most faces many times
+#: about a few points each).
 RASTER_WORTH = 200
 
 
@@ -124,8 +127,11 @@ class Projector:
         """State ``(n,)`` int of parameters ``uv (n, 2)`` in face ``k``'s trimmed domain: Trim.INSIDE,
         Trim.ON_BOUNDARY or Trim.OUTSIDE.
 
-        The raster decides points away from the boundary; ``BRepTopAdaptor_FClass2d`` the rest (all of them
-        until the face has been asked about ``RASTER_WORTH`` points in all).
+        The raster and the pcurves' polylines decide the points farther from a pcurve than its margin (see
+        :class:`~hot2cold.core.domain.DomainRaster`), ``BRepTopAdaptor_FClass2d`` the rest (all of them until the
+        face has been asked about ``RASTER_WORTH`` points in all).  The kernel classifies with a polygon of its
+        own, which on some faces lies farther from the pcurves than its tolerance (the docs' measurements); the
+        polylines answer as the pcurves do.
         """
         uv = np.asarray(uv, float).reshape(-1, 2)
         self._asked[k] = asked = self._asked.get(k, 0) + len(uv)
