@@ -154,15 +154,15 @@ class DomainRaster:
         out = np.full(len(uv), Trim.OUTSIDE, np.int8)
         finite = np.isfinite(cu) & np.isfinite(cv)
         # Up to one cell outside the box: the border cell decides (it is UNSURE where the boundary runs on
-        # the box's edge, and the walk from its centre crosses the boundary inside it: the boundary lies in
-        # the box); farther out: outside.
+        # the box's edge, and the point the kernel's: on a periodic surface it takes the point into the period,
+        # so a point just across a seam may be inside); farther out: outside.
         near = np.flatnonzero(finite & (cu >= -1) & (cu < n + 1) & (cv >= -1) & (cv < n + 1))
         i = np.clip(np.floor(cu[near]).astype(int), 0, n - 1)
         j = np.clip(np.floor(cv[near]).astype(int), 0, n - 1)
         state = self.state[i, j]
         beyond = (cu[near] < 0) | (cu[near] >= n) | (cv[near] < 0) | (cv[near] >= n)
         state = np.where(beyond & (state != Trim.UNSURE), Trim.OUTSIDE, state)
-        walk = np.flatnonzero(state == Trim.UNSURE)
+        walk = np.flatnonzero((state == Trim.UNSURE) & ~beyond)
         if len(walk):
             points = np.column_stack([cu[near[walk]], cv[near[walk]]])
             state[walk] = self._walk(points, i[walk], j[walk])
