@@ -182,7 +182,6 @@ class DomainRaster:
         c = np.column_stack([i, j]) + 0.5
         unsure = np.zeros(len(p), bool)
         on = np.zeros(len(p), bool)
-        crossed = np.zeros(len(p), np.int64)
 
         is_segment = item < len(self.start)
         sp, s = point[is_segment], item[is_segment]
@@ -196,7 +195,7 @@ class DomainRaster:
         side_o, side_q = _cross(b - a, o - a), _cross(b - a, q - a)
         side_a, side_b = _cross(q - o, a - o), _cross(q - o, b - o)
         hit = (np.sign(side_o) * np.sign(side_q) < 0) & (np.sign(side_a) * np.sign(side_b) < 0)
-        np.add.at(crossed, sp[hit], 1)
+        crossed = np.bincount(sp[hit], minlength=len(p))
 
         gp, g = point[~is_segment], item[~is_segment] - len(self.start)
         unsure[gp[_to_segments(self.ends[g], c[gp], p[gp]) <= self.reach[g]]] = True
@@ -206,7 +205,6 @@ class DomainRaster:
         state[unsure] = Trim.UNSURE
         state[on] = Trim.ON_BOUNDARY
         return state
-
 
 
 def _centre_states(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
