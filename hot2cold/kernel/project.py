@@ -10,8 +10,8 @@ not miss.
 Whether a parameter pair lies in a face's trimmed domain is read off a raster of the domain
 (:class:`hot2cold.core.domain.DomainRaster`) built from polylines of the face's pcurves; next to the boundary the
 polylines decide, and ``BRepTopAdaptor_FClass2d`` only the points within a margin of a pcurve (the polyline's
-distance from it, and the kernel's tolerance) or near a vertex.  Where the two differ beyond that margin it is
-the kernel's own polygon of the pcurves that is off, not the pcurves (:meth:`Projector.classify`).
+distance from it, and the kernel's tolerance) or near a vertex.  Where the two differ beyond that margin, the
+polylines answer as the pcurves do and the kernel does not (:meth:`Projector.classify`).
 """
 from __future__ import annotations
 
@@ -130,8 +130,8 @@ class Projector:
         The raster and the pcurves' polylines decide the points farther from a pcurve than its margin (see
         :class:`~hot2cold.core.domain.DomainRaster`), ``BRepTopAdaptor_FClass2d`` the rest (all of them until the
         face has been asked about ``RASTER_WORTH`` points in all).  The kernel classifies with a polygon of its
-        own, which on some faces lies farther from the pcurves than its tolerance (the docs' measurements); the
-        polylines answer as the pcurves do.
+        own, which on some faces lies farther from the pcurves than its tolerance, and on some answers
+        ON_BOUNDARY farther out than it (the docs' measurements); the polylines answer as the pcurves do.
         """
         uv = np.asarray(uv, float).reshape(-1, 2)
         self._asked[k] = asked = self._asked.get(k, 0) + len(uv)
