@@ -11,7 +11,8 @@ almost every point is far from the boundary.  So the face's parameter box is cut
   segment the straight line from the centre to the point crosses.  That is the boundary's answer where the
   point lies farther from every segment than the boundary curve can be from it (each segment's *margin*: a
   multiple of the curve's distance from the segment at its middle, plus the kernel's tolerance); a point
-  closer than that, or whose line passes through a gap between two polylines, is UNSURE, for the kernel;
+  closer than that, near a polyline's end (a face's vertex, :data:`END_REACH`), or whose line passes a vertex
+  or a gap between two polylines, is UNSURE, for the kernel; so is a point in a near cell outside the box;
 * a point within half the kernel's tolerance of the boundary curve (of a polyline's vertex, which lies on it,
   or of a segment the curve cannot be farther from than that) is on the boundary, as the kernel would say.
 
