@@ -188,6 +188,22 @@ def test_raster_leaves_the_points_within_a_margin_to_the_kernel():
         DomainRaster.build([chord, outer], (0, 1, 0, 1), n=4, midpoints=[arc_middle, arc_middle])
 
 
+def test_raster_leaves_a_wide_margin_to_the_kernel_without_listing_it():
+    """A boundary curve far from its one-segment polyline (its middle 0.3 off the chord, 77 cells of margin on a
+    raster of 64): the cells it comes near are the kernel's, and the raster does not list that segment in them
+    (its lists would grow as the square of the margin); with the curve on its chord the points are decided."""
+    chord = np.array([[0.2, 0.5], [0.8, 0.5]])
+    outer = np.array([[0.8, 0.5], [0.8, 0.1], [0.2, 0.1], [0.2, 0.5]])
+    outer_middles = 0.5 * (outer[:-1] + outer[1:])
+    raster = DomainRaster.build([chord, outer], (0, 1, 0, 1), n=64, midpoints=[np.array([[0.5, 0.8]]), outer_middles])
+    assert raster.kernel.sum() > 0.8 * 64 * 64 and not np.any(raster.items == 0)     # (segment 0: the chord)
+    assert np.all(raster.classify(np.array([[0.5, 0.51], [0.5, 0.3]])) == Trim.UNSURE)
+    narrow = DomainRaster.build([chord, outer], (0, 1, 0, 1), n=64, midpoints=[np.array([[0.5, 0.5]]), outer_middles])
+    assert not narrow.kernel.any()
+    assert np.all(narrow.classify(np.array([[0.5, 0.3], [0.5, 0.51], [0.21, 0.3]])) ==
+                  [Trim.INSIDE, Trim.OUTSIDE, Trim.INSIDE])
+
+
 @pytest.mark.heavy
 def test_classify_matches_fclass2d(part):
     """``Projector.classify`` (raster + kernel at the boundary) equals ``BRepTopAdaptor_FClass2d`` point by

@@ -56,6 +56,10 @@ MARGIN_FLOOR = 1e-6
 #: than its tolerance along the edges (up to 100 times it, seen on corpus parts): points within this many
 #: tolerances of an end, or of the gap there, are the kernel's.
 END_REACH = 1000.0
+#: A segment whose margin, or an end whose reach, is wider than this many cells (a pcurve far from its polyline, a
+#: wire with a wide gap) leaves every cell it comes near to the kernel: listing it in each would cost memory as
+#: the square of its width.
+WALK_MOST = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +83,8 @@ class DomainRaster:
         deviation) is on the boundary.
     cells, items : (k,) int, sorted cell numbers (``i n + j``) and what lies there: a segment ``0 <= item < s``,
         within its margin, or an end ``s + e``, within its reach.
+    kernel : (n, n) bool, the cells whose points are the kernel's alone (a segment or end wider than
+        :data:`WALK_MOST` comes near them).
     """
 
     box: np.ndarray
@@ -93,6 +99,7 @@ class DomainRaster:
     on: float
     cells: np.ndarray
     items: np.ndarray
+    kernel: np.ndarray
 
     @classmethod
     def build(cls, polylines: list[np.ndarray], box, n: int = 512, midpoints: list[np.ndarray] | None = None,
@@ -140,9 +147,13 @@ class DomainRaster:
         reach = _gaps(ends) + END_REACH * tol + MARGIN_FLOOR
         lo = np.concatenate([np.minimum(a, b) - margin[:, None], ends - reach[:, None]])
         hi = np.concatenate([np.maximum(a, b) + margin[:, None], ends + reach[:, None]])
-        cells, items = _cells_under(lo, hi, n)
+        wide = np.concatenate([margin, reach]) > WALK_MOST
+        cells, items = _cells_under(lo[~wide], hi[~wide], n)
+        items = np.flatnonzero(~wide)[items]
+        kernel = _cells_covered(lo[wide], hi[wide], n)
         state.reshape(-1)[cells] = Trim.UNSURE          # (a margin may reach past the cells grown above)
-        return cls(box, state, centre, a, b, deviation, margin, ends, reach, on, cells, items)
+        state[kernel] = Trim.UNSURE
+        return cls(box, state, centre, a, b, deviation, margin, ends, reach, on, cells, items, kernel)
 
     def classify(self, uv: np.ndarray) -> np.ndarray:
         """State ``(m,)`` int8 (Trim.INSIDE, Trim.ON_BOUNDARY, Trim.OUTSIDE or Trim.UNSURE) of parameter pairs
@@ -163,7 +174,7 @@ class DomainRaster:
         state = self.state[i, j]
         beyond = (cu[near] < 0) | (cu[near] >= n) | (cv[near] < 0) | (cv[near] >= n)
         state = np.where(beyond & (state != Trim.UNSURE), Trim.OUTSIDE, state)
-        walk = np.flatnonzero((state == Trim.UNSURE) & ~beyond)
+        walk = np.flatnonzero((state == Trim.UNSURE) & ~beyond & ~self.kernel[i, j])
         if len(walk):
             points = np.column_stack([cu[near[walk]], cv[near[walk]]])
             state[walk] = self._walk(points, i[walk], j[walk])
@@ -270,6 +281,19 @@ def _gaps(ends: np.ndarray) -> np.ndarray:
     nearest other end (of another polyline, or its own other end: a closed polyline): the boundary's gap there."""
     distance, _ = kd_tree(ends).query(ends, k=2)
     return distance[:, 1]
+
+
+def _cells_covered(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
+    """(n, n) bool: the cells of an ``n x n`` raster that the boxes ``lo``-``hi`` (each (m, 2), cell units) overlap
+    (summed corner marks, so a wide box costs no more than a narrow one)."""
+    first = np.clip(np.floor(lo).astype(np.int64), 0, n - 1)
+    last = np.clip(np.floor(hi).astype(np.int64), 0, n - 1) + 1
+    marks = np.zeros((n + 1, n + 1), np.int64)
+    np.add.at(marks, (first[:, 0], first[:, 1]), 1)
+    np.add.at(marks, (last[:, 0], first[:, 1]), -1)
+    np.add.at(marks, (first[:, 0], last[:, 1]), -1)
+    np.add.at(marks, (last[:, 0], last[:, 1]), 1)
+    return marks.cumsum(axis=0).cumsum(axis=1)[:n, :n] > 0
 
 
 def _cells_under(lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
