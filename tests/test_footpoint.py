@@ -164,7 +164,8 @@ def test_raster_of_a_polygon_decides_next_to_its_edges():
     assert np.all((state[decided] == Trim.INSIDE) == _even_odd(uv[decided], [star]))
     on = np.concatenate([star[:40], 0.5 * (star[:40] + star[1:41]) + 1e-10])
     assert np.all(raster.classify(on) == Trim.ON_BOUNDARY)
-    # the pieces a hair apart at the star's first vertex: a point whose way passes the gap is the kernel's
+    # the first piece moved a hair (1e-4), so that gaps open at its ends: a point whose way passes one is the
+    # kernel's
     apart = DomainRaster.build([star[:15] + [0.0, 1e-4], star[14:30], star[29:]], (0, 1, 0, 1), n=64)
     cell = np.floor(star[14] * 64)
     centre = (cell + 0.5) / 64
@@ -174,7 +175,7 @@ def test_raster_of_a_polygon_decides_next_to_its_edges():
 
 
 def test_raster_leaves_the_points_within_a_margin_to_the_kernel():
-    """A boundary curve that bulges from its polyline (a half circle given by its chord and its middle point):
+    """A boundary curve that bulges from its polyline (an arc given by its chord and its middle point):
     the points between chord and curve are UNSURE, not decided by the chord."""
     chord = np.array([[0.2, 0.5], [0.8, 0.5]])
     arc_middle = np.array([[0.5, 0.52]])
