@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from hot2cold.core.bspline import BSplineSurface, evaluate_surface, surface_normals
+from hot2cold.core.bspline import BSplineSurface, evaluate_curve, evaluate_surface, surface_normals
 from hot2cold.pipeline.classify import START_SPACING, classify_nodes, start_grid
 from hot2cold.core.domain import DomainRaster, Trim
 from hot2cold.io.field import as_field
-from hot2cold.core.footpoint import project_to_surface, surface_distances, surface_distances_above
+from hot2cold.core.footpoint import project_to_curve, project_to_surface, surface_distances, surface_distances_above
 from hot2cold.core.model import Role
 from hot2cold.kernel.project import Projector
 from hot2cold.pipeline.load import load_part
@@ -87,6 +87,102 @@ def test_newton_checks_its_input():
         project_to_surface(surface, np.zeros((4, 2)), np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"start must be \(n, 2\)"):
         project_to_surface(surface, np.zeros((4, 3)), np.zeros((3, 2)))
+
+
+def _near_edge_points(curve, n: int, offset: float, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points ``(n, 3)`` up to ``offset`` mm off ``curve`` (inside its range, away from its ends), and the
+    parameters ``(n,)`` of the nearest of 200 samples of the curve, Newton's starts."""
+    lo, hi = curve.domain
+    t = rng.uniform(lo + 0.02 * (hi - lo), hi - 0.02 * (hi - lo), n)
+    points = evaluate_curve(curve, t) + rng.uniform(-offset, offset, (n, 3))
+    s = np.linspace(lo, hi, 200)
+    return points, s[cKDTree(evaluate_curve(curve, s)).query(points)[1]]
+
+
+@pytest.mark.heavy
+def test_curve_newton_matches_kernel(part):
+    """Points within 0.05 mm of every edge, started from the nearest of 200 samples of its curve: where Newton
+    settles (most points), it finds the foot point of the kernel's ``GeomAPI_ProjectPointOnCurve``: the same
+    distance to 1e-9 mm (or nearer: the kernel's own iteration stops sooner) and parameter to 1e-9 of the
+    range."""
+    rng = np.random.default_rng(5)
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    settled_total = asked = 0
+    for edge in part.edges:
+        if edge.degenerate:
+            continue
+        points, start = _near_edge_points(edge.curve, 100, 0.05, rng)
+        feet = project_to_curve(edge.curve, points, start)
+        ref_t, ref_dist = projector.to_edge(edge.index, points)
+        lo, hi = edge.curve.domain
+        s = feet.settled
+        np.testing.assert_array_less(feet.distance[s], ref_dist[s] + 1e-9)
+        np.testing.assert_array_less(np.abs(feet.t[s] - ref_t[s]) / (hi - lo), 1e-9)
+        settled_total += int(s.sum())
+        asked += len(points)
+    assert settled_total > 0.9 * asked
+
+
+def test_curve_newton_leaves_end_minima_open_and_checks_its_input():
+    """Points beyond a curve's end (their nearest point is the end) are not settled: they are for the kernel;
+    points on the curve settle on their own parameters; shapes are checked on entry."""
+    part = load_part(SAMPLES / "twisted_blade.step", Settings())
+    curve = next(e.curve for e in part.edges if not e.degenerate)
+    lo, hi = curve.domain
+    t = np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), 25)
+    feet = project_to_curve(curve, evaluate_curve(curve, t), t + 0.01 * (hi - lo))
+    assert feet.settled.all()
+    np.testing.assert_allclose(feet.t, t, rtol=0, atol=1e-9 * (hi - lo))
+    assert feet.distance.max() < 1e-9
+    end, tangent = evaluate_curve(curve, [hi])[0], evaluate_curve(curve, [hi])[0] - evaluate_curve(curve, [hi - 1e-3 * (hi - lo)])[0]
+    beyond = end + np.outer(np.linspace(1, 5, 10), tangent / np.linalg.norm(tangent))
+    feet = project_to_curve(curve, beyond, np.full(10, hi - 0.05 * (hi - lo)))
+    assert not feet.settled.any()
+    assert np.all((feet.t >= lo) & (feet.t <= hi))
+    with pytest.raises(ValueError, match=r"points must be \(n, 3\)"):
+        project_to_curve(curve, np.zeros((4, 2)), np.zeros(4))
+    with pytest.raises(ValueError, match=r"start must be \(n,\)"):
+        project_to_curve(curve, np.zeros((4, 3)), np.zeros((4, 2)))
+
+
+def test_nodes_on_a_thin_blade_need_no_far_side_start():
+    """``_foot_points`` starts a node again from the far side of a thin edge unless it settled on the face
+    (within ``ON_SURFACE`` of the diagonal): on the thin blade's largest face, nodes on the face and up to 0.2 mm
+    off it (its edges are 0.03-0.06 mm thick) get the same foot points either way (to rounding), and only the
+    nodes that did not settle on the face are looked at for a far side (their ``_FAR_SIDE_STARTS`` nearest
+    starts asked of the tree)."""
+    from hot2cold.pipeline import classify as cl
+
+    class Counted:
+        """The start tree, counting the points asked for more than their nearest start."""
+
+        def __init__(self, tree):
+            self.tree, self.asked = tree, 0
+
+        def query(self, x, k=1, **kwargs):
+            self.asked += len(x) if k > 1 else 0
+            return self.tree.query(x, k=k, **kwargs)
+
+    part = load_part(SAMPLES / "thin_blade.step", Settings())
+    face = max(part.faces, key=lambda f: f.surface.shape[0] * f.surface.shape[1])
+    projector = Projector(part.kernel.faces, part.kernel.edges)
+    box = projector.face_box(face.index)
+    rng = np.random.default_rng(2)
+    on, _ = _near_surface_nodes(face, 2000, 0.0, rng)
+    off, _ = _near_surface_nodes(face, 2000, 0.2, rng)
+    points = np.concatenate([on, off])
+    grid, grid_uv, tree = cl.Starts(part).of(face.index)
+    every_tree, skip_tree = Counted(tree), Counted(tree)
+    every = cl._foot_points(face, points, (grid, grid_uv, every_tree), box, -1.0)
+    skip = cl._foot_points(face, points, (grid, grid_uv, skip_tree), box, cl.ON_SURFACE * part.diagonal)
+    size = box[[1, 3]] - box[[0, 2]]
+    np.testing.assert_array_equal(skip.settled, every.settled)
+    np.testing.assert_allclose(skip.distance, every.distance, rtol=0, atol=1e-12)
+    assert np.max(np.abs(skip.uv - every.uv) / size) < 1e-12
+    on_face = skip.settled & (skip.distance <= cl.ON_SURFACE * part.diagonal)
+    assert on_face[:2000].mean() > 0.95 and on_face[2000:].mean() < 0.01
+    assert every_tree.asked == len(points)
+    assert skip_tree.asked == len(points) - on_face.sum()
 
 
 def _square_with_hole(n_hole: int = 2001):

@@ -613,6 +613,13 @@ def evaluate_curve(curve: BSplineCurve, t) -> np.ndarray:
     return _combine(start[:, None] + np.arange(curve.degree + 1), [vals], curve.poles)[0]
 
 
+def curve_jet(curve: BSplineCurve, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(C, C', C'')``, each (m, 3), of ``curve`` at parameters ``t`` (m,), from one evaluation of the basis
+    rows (the derivatives as :func:`curve_derivative_basis` takes them)."""
+    start, vals = _curve_rows(curve, t, 2)
+    return tuple(_combine(start[:, None] + np.arange(curve.degree + 1), vals, curve.poles))
+
+
 def polyline_length(points: np.ndarray) -> float:
     """Length of the polyline through ``points (m, 3)`` (the length of a curve sampled densely enough)."""
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import (BSplineCurve, BSplineSurface, cross, curve_derivative_basis, evaluate_curve, evaluate_surface,
-                      surface_first_jet, surface_jet)
+from .bspline import (BSplineCurve, BSplineSurface, cross, curve_derivative_basis, curve_jet, evaluate_curve,
+                      evaluate_surface, surface_first_jet, surface_jet)
 
 #: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
 #: as Newton's method converges quadratically the error left is of the order of the step squared (1e-18 of
@@ -144,6 +144,75 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
     settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
     return uv, distance, settled
+
+
+@dataclass(frozen=True, eq=False)
+class CurveFeet:
+    """Foot points of ``n`` points on one curve.
+
+    Attributes
+    ----------
+    t : (n,) float, the parameters of the foot points.
+    distance : (n,) float, point to foot point (mm).
+    settled : (n,) bool, the foot point is an inner minimum found to rounding; where False, ``t`` and
+        ``distance`` are the last iterate and the caller should ask the kernel instead.
+    """
+
+    t: np.ndarray
+    distance: np.ndarray
+    settled: np.ndarray
+
+
+def project_to_curve(curve: BSplineCurve, points: np.ndarray, start: np.ndarray) -> CurveFeet:
+    """Foot points of ``points (n, 3)`` on ``curve`` within its domain by Newton's method on
+    ``g = C' . (C - P) = 0`` from the parameters ``start (n,)``, all points at once: the one-parameter case of
+    :func:`project_to_surface`, with its rules (``H = C'.C' + C''.(C - P)``, Gauss-Newton's ``C'.C'`` where
+    ``H`` is not safely positive; a point settles on a Newton step below :data:`STEP_RTOL` of the domain that
+    stays inside it, no farther than its start).  A point whose minimum lies at an end of the domain does not
+    settle."""
+    points = np.asarray(points, dtype=float)
+    start = np.asarray(start, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must be (n, 3), got shape {points.shape}")
+    if start.shape != (len(points),):
+        raise ValueError(f"start must be (n,) = ({len(points)},), got shape {start.shape}")
+    lo, hi = curve.domain
+    settle = STEP_RTOL * (hi - lo)
+    t = np.clip(start, lo, hi)
+    settled = np.zeros(len(points), bool)
+    distance = np.full(len(points), np.nan)
+    start_distance = np.full(len(points), np.inf)
+    active = np.arange(len(points))
+    for iteration in range(MAX_ITERATIONS):
+        if not len(active):
+            break
+        c, d1, d2 = curve_jet(curve, t[active])
+        r = c - points[active]
+        if iteration == 0:
+            start_distance = np.linalg.norm(r, axis=1)
+        g = np.einsum("ij,ij->i", d1, r)
+        e = np.einsum("ij,ij->i", d1, d1)
+        h = e + np.einsum("ij,ij->i", d2, r)
+        newton = h > 1e-3 * e
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = -g / np.where(newton, h, e)
+        bad = ~np.isfinite(step)
+        step[bad] = 0.0
+        target = t[active] + step
+        new = np.clip(target, lo, hi)
+        clamped = np.abs(new - target) > settle
+        stuck = np.abs(new - t[active]) <= settle
+        tiny = np.abs(step) <= settle
+        t[active] = new
+        done = tiny & newton & ~clamped & ~bad
+        distance[active[done]] = np.linalg.norm(r[done] + d1[done] * step[done, None], axis=1)
+        settled[active[done]] = True
+        active = active[~(tiny | stuck | bad)]
+    rest = np.flatnonzero(~settled)
+    if len(rest):
+        distance[rest] = np.linalg.norm(evaluate_curve(curve, t[rest]) - points[rest], axis=1)
+    settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
+    return CurveFeet(t, distance, settled)
 
 
 def curve_distances(curve: BSplineCurve, points: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -9,9 +9,11 @@ Not every node is projected onto every face: a k-d tree over points sampled insi
 domain names the few candidate faces of each node.  On those, the foot points are found by Newton's method
 for all nodes of a face at once (:mod:`hot2cold.core.footpoint`), each node started at the nearest point of a
 grid dense only where the face bends (knot span by knot span, :func:`start_grid`), and again from the far
-side of a thin edge where a start there is among its nearest (:func:`_foot_points`); the kernel's
-``GeomAPI_ProjectPointOnSurf`` settles what Newton leaves open (a few per thousand nodes, near the faces'
-borders).  The result is the kernel's: the same faces, distances and parameters to 1e-9 as every node
+side of a thin edge where a start there is among its nearest and the node did not settle on the face
+(:func:`_foot_points`); the kernel's ``GeomAPI_ProjectPointOnSurf`` settles what Newton leaves open (a few per
+thousand nodes, near the faces' borders).  The nodes near an edge are projected onto its curve the same way,
+from the nearest of the edge's samples (:meth:`_Boundary.edge_feet`), the kernel's
+``GeomAPI_ProjectPointOnCurve`` only where Newton does not settle (a foot point at the curve's end).  The result is the kernel's: the same faces, distances and parameters to 1e-9 as every node
 projected onto every face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; ``docs/benchmarks/speed.md``
 gives how much faster, on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
 """
@@ -29,7 +31,7 @@ from ..core.trees import kd_tree
 from ..core.bspline import (bend_parameters, evaluate_curve, evaluate_surface, grid_points, polyline_length,
                             surface_normals)
 from ..io.field import DisplacementField
-from ..core.footpoint import FootPoints, project_to_surface
+from ..core.footpoint import FootPoints, project_to_curve, project_to_surface
 from ..core.domain import Trim
 from ..core.model import Classification, Part, Role, runs
 from ..settings import Settings
@@ -274,8 +276,9 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
     cloud, cloud_face, apart = starts.cloud(projector, len(points))
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
     faces = [(k, pair_node[group]) for k, group in runs(pair_face)]
+    on_surface = ON_SURFACE * part.diagonal
     feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]),
-                                                projector.face_box(job[0])), faces, threads,
+                                                projector.face_box(job[0]), on_surface), faces, threads,
                        cost=[len(nodes) for _, nodes in faces])
     for (k, nodes), fp in zip(faces, feet):
         near = fp.settled & (fp.distance <= reach) & (fp.distance < best[nodes])
@@ -287,14 +290,21 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
 
 #: Starts a node looks among for one on the far side of a thin edge (:func:`_foot_points`).
 _FAR_SIDE_STARTS = 16
+#: A node whose foot point from its nearest start lies within this share of the part's diagonal lies on the
+#: face: no foot point on the far side of a thin edge is nearer (the surface would have to pass within it
+#: twice, a wall thinner than any kernel tolerance), and none is looked for (:func:`_foot_points`).
+ON_SURFACE = 1e-9
 
 
-def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, cKDTree], box) -> FootPoints:
+def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, cKDTree], box,
+                 on_surface: float) -> FootPoints:
     """Foot points of ``points (m, 3)`` on ``face`` by Newton's method (:func:`project_to_surface` within
     ``box``), each started at the nearest point of the face's :func:`start_grid` (``start``: its points, their
     uv and a k-d tree over the points, :meth:`Starts.of`), and again at the nearest
     of its ``_FAR_SIDE_STARTS`` nearest starts whose normal points the other way, where there is one: the
-    far side of a thin edge.  Where both settle, the nearer foot point is kept.
+    far side of a thin edge.  Where both settle, the nearer foot point is kept.  A point that settles within
+    ``on_surface`` (mm) of the face from its nearest start lies on it, and is not started again (a negative
+    ``on_surface``: every point is).
 
     The start grid is dense across a bend but not along it (a trailing edge's spacing across is its radius,
     along it the plain spacing): a node well off the surface next to a thin edge, nearer to a grid line
@@ -304,23 +314,28 @@ def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, 
     surface = face.surface
     grid, grid_uv, tree = start
     k = min(_FAR_SIDE_STARTS, len(grid))
-    _, near = tree.query(points, k=k, workers=-1)
-    near = near.reshape(len(points), k)
-    fp = project_to_surface(surface, points, grid_uv[near[:, 0]], box)
+    _, first = tree.query(points, k=1, workers=-1)
+    fp = project_to_surface(surface, points, grid_uv[first], box)
+    ask = np.flatnonzero(~(fp.settled & (fp.distance <= on_surface)))
+    if k < 2 or not len(ask):
+        return fp
+    _, near = tree.query(points[ask], k=k, workers=-1)
+    near = near.reshape(len(ask), k)
     used = np.zeros(len(grid), bool)                          # the normals of those starts only
-    used[near.ravel()] = True
+    used[near.ravel()] = used[first[ask]] = True
     asked = np.flatnonzero(used)
     at = np.cumsum(used) - 1                                  # a start's row among the asked ones
     normal = surface_normals(surface, grid_uv[asked, 0], grid_uv[asked, 1])               # (asked, 3)
-    nearest = normal[at[near[:, 0]]]                                                        # (m, 3)
-    opposed = np.zeros(near.shape, bool)     # a column at a time: (m, k, 3) normals were 384 MB at 1 M nodes
+    nearest = normal[at[first[ask]]]                                                        # (a, 3)
+    opposed = np.zeros(near.shape, bool)     # a column at a time: (a, k, 3) normals were 384 MB at 1 M nodes
     with np.errstate(invalid="ignore"):
         for j in range(1, k):
             opposed[:, j] = np.einsum("mc,mc->m", normal[at[near[:, j]]], nearest) < 0.0    # NaN compares False
-    again = np.flatnonzero(opposed.any(axis=1))
-    if not len(again):
+    hit = opposed.any(axis=1)
+    if not hit.any():
         return fp
-    other = project_to_surface(surface, points[again], grid_uv[near[again, opposed[again].argmax(axis=1)]], box)
+    again = ask[hit]
+    other = project_to_surface(surface, points[again], grid_uv[near[hit, opposed[hit].argmax(axis=1)]], box)
     # a node Newton left open from its nearest start stays open: the kernel finds its nearest foot point
     better = other.settled & fp.settled[again] & (other.distance < fp.distance[again])
     rows = again[better]
@@ -372,8 +387,9 @@ def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, 
     # be a second local minimum within ``node_distance``).
     unsettled = []
     faces = [(k, pair_node[group], projector.face_box(k)) for k, group in runs(pair_face)]
-    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]), job[2]), faces,
-                       threads, cost=[len(nodes) for _, nodes, _ in faces])
+    on_surface = ON_SURFACE * part.diagonal
+    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]), job[2],
+                                                on_surface), faces, threads, cost=[len(nodes) for _, nodes, _ in faces])
     for (k, nodes, _), fp in zip(faces, feet):
         offer(k, nodes[fp.settled], fp.uv[fp.settled], fp.distance[fp.settled])
         taken = fp.settled & (owner[nodes] == k) & (best[nodes] == fp.distance)
@@ -403,27 +419,50 @@ class _Boundary:
     vertices : cKDTree over the part's vertices ``(nv, 3)``, or None when it has none.
     samples : cKDTree over points along every non-degenerate edge, ``h`` apart, or None when it has none.
     sample_edge : ``(m,)`` int, the edge of each sample.
+    sample_t : ``(m,)`` float, the parameter of each sample on its edge's curve.
     h : float, the sample spacing (mm): a node within d of an edge curve is within d + h of its samples.
     """
 
     vertices: cKDTree | None
     samples: cKDTree | None
     sample_edge: np.ndarray
+    sample_t: np.ndarray
     h: float
 
     @classmethod
     def of(cls, part: Part) -> _Boundary:
         vertices = cKDTree(part.vertices) if len(part.vertices) else None
-        samples, sample_edge, h = [], [], part.diagonal / 400.0
+        samples, sample_edge, sample_t, h = [], [], [], part.diagonal / 400.0
         for edge in part.edges:
             if edge.degenerate:
                 continue
             s = np.linspace(*edge.curve.domain, max(2, int(np.ceil(curve_length(edge.curve) / h)) + 1))
             samples.append(evaluate_curve(edge.curve, s))
             sample_edge.append(np.full(len(s), edge.index))
+            sample_t.append(s)
         if not samples:
-            return cls(vertices, None, np.zeros(0, int), h)
-        return cls(vertices, cKDTree(np.concatenate(samples)), np.concatenate(sample_edge), h)
+            return cls(vertices, None, np.zeros(0, int), np.zeros(0), h)
+        return cls(vertices, cKDTree(np.concatenate(samples)), np.concatenate(sample_edge), np.concatenate(sample_t), h)
+
+    def edge_feet(self, part: Part, projector: Projector, e: int, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Foot points of ``points (n, 3)`` on edge ``e``'s curve within its range, as
+        :meth:`~hot2cold.kernel.project.Projector.to_edge` gives them (``t (n,)``, ``distance (n,)``; the nearer
+        end where no foot point is nearer): by Newton's method (:func:`~hot2cold.core.footpoint.project_to_curve`)
+        from the nearest of the edge's samples, the kernel where it does not settle."""
+        curve = part.edges[e].curve
+        mine = np.flatnonzero(self.sample_edge == e)
+        _, nearest = cKDTree(self.samples.data[mine]).query(points, k=1, workers=-1)
+        feet = project_to_curve(curve, points, self.sample_t[mine][nearest])
+        t, distance = feet.t.copy(), feet.distance.copy()
+        ends = evaluate_curve(curve, np.array(curve.domain))                                    # (2, 3)
+        to_end = np.linalg.norm(points[:, None, :] - ends[None], axis=2)                        # (n, 2)
+        end = np.argmin(to_end, axis=1)
+        nearer = to_end[np.arange(len(points)), end] <= distance
+        t[nearer], distance[nearer] = np.array(curve.domain)[end[nearer]], to_end[np.arange(len(points)), end][nearer]
+        open_ = np.flatnonzero(~feet.settled)
+        if len(open_):
+            t[open_], distance[open_] = projector.to_edge(e, points[open_])
+        return t, distance
 
 
 def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classification, candidates: np.ndarray,
@@ -478,7 +517,7 @@ def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classific
         nodes = nodes[mine]
         if not len(nodes):
             continue
-        e_t, e_dist = projector.to_edge(e, points[nodes])
+        e_t, e_dist = boundary.edge_feet(part, projector, e, points[nodes])
         hit = (e_dist <= edge_distance) & (e_dist < best[nodes])
         idx = nodes[hit]
         best[idx] = e_dist[hit]
