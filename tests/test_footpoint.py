@@ -134,7 +134,8 @@ def test_curve_newton_leaves_end_minima_open_and_checks_its_input():
     assert feet.settled.all()
     np.testing.assert_allclose(feet.t, t, rtol=0, atol=1e-9 * (hi - lo))
     assert feet.distance.max() < 1e-9
-    end, tangent = evaluate_curve(curve, [hi])[0], evaluate_curve(curve, [hi])[0] - evaluate_curve(curve, [hi - 1e-3 * (hi - lo)])[0]
+    end = evaluate_curve(curve, [hi])[0]
+    tangent = end - evaluate_curve(curve, [hi - 1e-3 * (hi - lo)])[0]
     beyond = end + np.outer(np.linspace(1, 5, 10), tangent / np.linalg.norm(tangent))
     feet = project_to_curve(curve, beyond, np.full(10, hi - 0.05 * (hi - lo)))
     assert not feet.settled.any()

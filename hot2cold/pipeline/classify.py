@@ -13,9 +13,10 @@ side of a thin edge where a start there is among its nearest and the node did no
 (:func:`_foot_points`); the kernel's ``GeomAPI_ProjectPointOnSurf`` settles what Newton leaves open (a few per
 thousand nodes, near the faces' borders).  The nodes near an edge are projected onto its curve the same way,
 from the nearest of the edge's samples (:meth:`_Boundary.edge_feet`), the kernel's
-``GeomAPI_ProjectPointOnCurve`` only where Newton does not settle (a foot point at the curve's end).  The result is the kernel's: the same faces, distances and parameters to 1e-9 as every node
-projected onto every face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; ``docs/benchmarks/speed.md``
-gives how much faster, on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
+``GeomAPI_ProjectPointOnCurve`` only where Newton does not settle (a foot point at the curve's end).  The
+result is the kernel's: the same faces, distances and parameters to 1e-9 as every node projected onto every
+face (``tests/test_footpoint.py``, ``benchmarks/scale.py``; ``docs/benchmarks/speed.md`` gives how much faster,
+on Rotor 37 and the thin blade of ``sample_parts/thin_blade.step``).
 """
 from __future__ import annotations
 
