@@ -17,7 +17,7 @@ import numpy as np
 from .edge_fit import EdgeMorph
 from .face_fit import FaceMorph
 from ..io.field import DisplacementField
-from ..core.footpoint import curve_distances, project_to_surface
+from ..core.footpoint import curve_distances, project_to_curve, project_to_surface
 from ..kernel.validity import SolidCheck, face_areas
 from ..kernel.project import Projector
 from ..core.model import Classification, Part, Role
@@ -620,9 +620,9 @@ def node_errors(cls: Classification, field: DisplacementField, cold: ColdGeometr
 
     On the cold surfaces the face nodes' foot points are found by Newton's method from their hot parameters
     (:mod:`hot2cold.core.footpoint`); the kernel (``cold.projector``) is asked only where that does not
-    settle.  The edge nodes' foot points are the kernel's, polished by Gauss-Newton on the cold curves: the
-    kernel's projection stops short of the foot point on edges of high degree.  The faces' Newton runs in up
-    to ``threads`` threads.
+    settle.  The edge nodes' likewise on the cold curves, from their hot parameters; where that does not settle,
+    the kernel's, polished by Gauss-Newton on the cold curves (the kernel's projection stops short of the foot
+    point on edges of high degree).  The faces' Newton runs in up to ``threads`` threads.
     """
     projector, cold_surfaces, cold_curves = cold.projector, cold.surfaces, cold.curves
     errors = np.full(len(cls.role), np.nan)
@@ -636,6 +636,12 @@ def node_errors(cls: Classification, field: DisplacementField, cold: ColdGeometr
         if len(open_):
             errors[open_] = projector.to_face(k, target[open_])[1]
     for k, nodes in cls.groups(Role.EDGE):
+        if cold_curves[k] is not None:           # Newton from the hot parameters; the kernel where it stays open
+            feet = project_to_curve(cold_curves[k], target[nodes], cls.t[nodes])
+            errors[nodes] = feet.distance
+            nodes = nodes[~feet.settled]
+            if not len(nodes):
+                continue
         t, distance = projector.to_edge(k, target[nodes])
         if cold_curves[k] is not None:
             found = np.isfinite(t)
