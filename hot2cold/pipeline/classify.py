@@ -455,11 +455,12 @@ class _Boundary:
         _, nearest = cKDTree(self.samples.data[mine]).query(points, k=1, workers=-1)
         feet = project_to_curve(curve, points, self.sample_t[mine][nearest])
         t, distance = feet.t.copy(), feet.distance.copy()
-        ends = evaluate_curve(curve, np.array(curve.domain))                                    # (2, 3)
-        to_end = np.linalg.norm(points[:, None, :] - ends[None], axis=2)                        # (n, 2)
+        domain = np.array(curve.domain)
+        to_end = np.linalg.norm(points[:, None, :] - evaluate_curve(curve, domain)[None], axis=2)   # (n, 2)
         end = np.argmin(to_end, axis=1)
-        nearer = to_end[np.arange(len(points)), end] <= distance
-        t[nearer], distance[nearer] = np.array(curve.domain)[end[nearer]], to_end[np.arange(len(points)), end][nearer]
+        end_distance = to_end[np.arange(len(points)), end]
+        nearer = end_distance <= distance
+        t[nearer], distance[nearer] = domain[end[nearer]], end_distance[nearer]
         open_ = np.flatnonzero(~feet.settled)
         if len(open_):
             t[open_], distance[open_] = projector.to_edge(e, points[open_])
