@@ -149,7 +149,7 @@ def test_curve_newton_leaves_end_minima_open_and_checks_its_input():
 def test_nodes_on_a_thin_blade_need_no_far_side_start():
     """``_foot_points`` starts a node again from the far side of a thin edge unless it settled on the face
     (within ``ON_SURFACE`` of the diagonal): on the thin blade's largest face, nodes on the face and up to 0.2 mm
-    off it (its edges are 0.03-0.06 mm thick) get the same foot points either way (to rounding), and only the
+    off it (its edges are 0.026 and 0.059 mm in radius) get the same foot points either way (to rounding), and only the
     nodes that did not settle on the face are looked at for a far side (their ``_FAR_SIDE_STARTS`` nearest
     starts asked of the tree)."""
     from hot2cold.pipeline import classify as cl
