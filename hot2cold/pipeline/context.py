@@ -23,7 +23,7 @@ from .distance import FieldDistance
 from .edge_fit import EdgeMorph, fit_edge, morph_edges, vertex_displacements
 from .face_fit import FaceMorph, face_problem, morph_face, morph_faces, solve_face
 from .fit_inputs import FitInputs
-from .g1 import CornerReport, TangentEdge, correct_corners, edge_decided, tangent_edges
+from .g1 import CornerReport, TangentEdge, correct_corners, corners_touched, edge_decided, tangent_edges
 
 __all__ = ["MorphContext"]
 
@@ -146,14 +146,16 @@ class MorphContext:
 
     def refit_edges(self, part: Part, edge_morphs: list[EdgeMorph], refined: set[int]) -> list[EdgeMorph]:
         """The edges in ``refined`` of the refined ``part`` morphed again (eq. 10-20) and the corners of
-        tangent edges put right again; returns every edge's morph
-        (:func:`~hot2cold.pipeline.refine.refine`'s ``fit_edges``)."""
+        tangent edges they touch put right again (:func:`~hot2cold.pipeline.g1.corners_touched`; the others
+        keep their curves); returns every edge's morph (:func:`~hot2cold.pipeline.refine.refine`'s
+        ``fit_edges``)."""
         inputs = self.fit_inputs
         edge_morphs = list(edge_morphs)
         for e in refined:
             edge_morphs[e] = fit_edge(part, part.edges[e], inputs)
-        if self.tangent:
-            curves, _ = correct_corners(part, [m.curve for m in edge_morphs], self.tangent,
-                                        decided=edge_decided(part), strain=self.strain)
+        if self.tangent and refined:
+            curves = [m.curve for m in edge_morphs]
+            curves, _ = correct_corners(part, curves, self.tangent, decided=edge_decided(part), strain=self.strain,
+                                        vertices=corners_touched(part, curves, set(refined)))
             edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
         return edge_morphs

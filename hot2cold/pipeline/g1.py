@@ -803,8 +803,8 @@ def _spread(normals: dict) -> float:
 
 
 def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
-                    anchors: dict | None = None, decided: set[tuple[int, int]] | None = None, strain: float = 0.0
-                    ) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
+                    anchors: dict | None = None, decided: set[tuple[int, int]] | None = None, strain: float = 0.0,
+                    vertices: set[int] | None = None) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
     """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
 
     Parameters
@@ -822,6 +822,10 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
         angle (an affine map changes angles); that is the field's, not a kink the morph added.  Corners where
         the morph opened the angle between the faces by less than :data:`KINK_NOISE_DEG` plus that are left
         alone (:func:`kink_bound`).
+    vertices : the vertices whose corners to correct (default: every vertex of a tangent edge); the others'
+        edges keep their curves there.  The correction is not a projection (on its own output it can move an
+        edge again, by a fraction of its first move), so corners already corrected are best left alone:
+        :func:`corners_touched` gives the vertices whose corners a refit of some edges changed.
 
     At a vertex, the faces joined by tangent edges there form a cluster.  Its common plane has the normal
     ``n_T``, the mean of the faces' normals (each the cross product of its two edges' tangents, oriented
@@ -840,7 +844,8 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
     by_vertex: dict[int, list[TangentEdge]] = {}
     for te in edges:
         for v in set(part.edges[te.edge].vertices):
-            by_vertex.setdefault(v, []).append(te)
+            if vertices is None or v in vertices:
+                by_vertex.setdefault(v, []).append(te)
     pending = [corners.plan(v, faces) for v in sorted(by_vertex) for faces in _clusters(by_vertex[v])]
     curves = corners.moved()
     reports = []
@@ -853,6 +858,24 @@ def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[T
             log.info("G1: vertex %d (faces %s): corner angle %.3g -> %.3g deg", corner.vertex, corner.faces,
                      corner.angle_before, after)
     return curves, reports
+
+
+def corners_touched(part: Part, curves: list[BSplineCurve | None], edges: set[int]) -> set[int]:
+    """The vertices whose corners :func:`correct_corners` must put right after the ``edges`` were fitted again:
+    their ends, and the far end of every edge there whose pole next to one end is next to the other too (an
+    edge of three poles or fewer: moving it at one corner turns it at the other), until no more are added."""
+    touched = {v for e in edges for v in part.edges[e].vertices}
+    todo = list(touched)
+    while todo:
+        for e in part.vertex_edges[todo.pop()]:
+            curve = curves[e]
+            if curve is None or curve.n_poles > 3:
+                continue
+            for w in part.edges[e].vertices:
+                if w not in touched:
+                    touched.add(w)
+                    todo.append(w)
+    return touched
 
 
 def _clusters(at_vertex: list[TangentEdge]) -> list[list[int]]:
