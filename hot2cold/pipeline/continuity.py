@@ -127,17 +127,25 @@ def _turn_along_curves(context: MorphContext, surfaces: list[BSplineSurface], al
     """The faces of the trimming curves ``along`` (their kinks ``plain`` on the plain fits ``surfaces``) fitted
     again with their tangents there turned into the common plane; a face that may not turn (it would leave the
     field, :data:`_TURNING`, or kink one of the edges more than the plain fits) keeps its fit, and the other
-    turns to it, in up to :data:`_G1_ROUNDS` rounds.  Returns the refits taken and the faces refused (why)."""
+    turns to it, in up to :data:`_G1_ROUNDS` rounds (a face none of whose neighbours across the curves came to
+    keep its fit turns as it did).  Returns the refits taken and the faces refused (why)."""
     part = context.part
     turning = {f for e in along for f, side in zip(e.faces, e.sides) if side is None}
+    across: dict[int, set[int]] = {}                         # face -> the faces across its curves
+    for e in along:
+        for k in e.faces:
+            across.setdefault(k, set()).update(set(e.faces) - {k})
     kept: set[int] = set(range(len(part.faces))) - turning    # faces that keep their fits along the curves
     refits: dict[int, FaceMorph] = {}
     refused: dict[int, str] = {}
+    off: dict[int, str] = {}
     for _ in range(_G1_ROUNDS):       # both faces turn to the common plane; a face that may not turn (it
         order = sorted(turning - kept)  # would leave the field) keeps its fit, and the other turns to it
         near = Neighbours(part, surfaces, frozenset(kept))
-        turns = [turn_rows(near, along, k, TURN_WEIGHT) for k in order]
-        refits = dict(zip(order, context.refit_faces(order, edge_morphs, turns)))
+        again = [k for k in order if k not in refits or across[k] & set(off)]
+        turns = [turn_rows(near, along, k, TURN_WEIGHT) for k in again]
+        refits.update(zip(again, context.refit_faces(again, edge_morphs, turns)))
+        refits = {k: refits[k] for k in order}
         off = context.distances.all_moved_off({k: (surfaces[k], refit.surface) for k, refit in refits.items()},
                                               grids, _TURNING)
         # a turn that leaves one of its edges more kinked than the plain fits is no correction (next to a
