@@ -309,6 +309,15 @@ class EdgeErrors(NamedTuple):
     between: float
 
 
+def _curves_off(surface: BSplineSurface, curves: list[BSplineCurve], uses: list, box) -> np.ndarray:
+    """The distances ``(m,)`` from ``surface`` of the points of ``curves`` at each of the edge ``uses``'
+    parameters ``use.t``, each projected from ``use.uv`` (in face ``box``), all in one projection."""
+    if not uses:
+        return np.zeros(0)
+    points = np.concatenate([evaluate_curve(curve, use.t) for curve, use in zip(curves, uses)])
+    return surface_distances(surface, points, np.concatenate([use.uv for use in uses]), box)
+
+
 def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField,
                  grid: EdgeGrid) -> EdgeErrors:
     t, at_nodes = edge_errors(edge, morph, cls, field)
@@ -662,6 +671,7 @@ class _Refining:
         self.face_rounds = np.zeros(len(part.faces), int)
         self.edge_rounds = np.zeros(len(part.edges), int)
         self.grids: dict[int, FaceGrid] = {}
+        self.hot_gaps: dict[int, np.ndarray] = {}   # face -> distances of its hot edges' points from it
         self.sizes = cls.counts(Role.FACE, len(part.faces))        # each face's nodes: its work's cost in threads
         self.face_err = map_threads(self._face_errors, range(len(part.faces)), refitter.threads, cost=self.sizes)
         self.edge_err = [self._edge_errors(e) for e in range(len(part.edges))]
@@ -679,23 +689,24 @@ class _Refining:
         grid points, and of its cold edges at their pcurves' points beyond the hot edges' own (the gap the
         morph opened, which the sew would have to close; a hot part's gaps are its own)."""
         face, morph, cls, field = self.part.faces[k], self.faces[k], self.cls, self.field
-        grid, edges, edge_morphs = self.targets.grids[k], self.part.edges, self.edges
+        grid = self.targets.grids[k]
         nodes = cls.nodes_of(Role.FACE, face.index)
         target = cls.foot[nodes] + field.displacements[nodes]
         at_nodes = surface_distances_above(morph.surface, target, cls.uv[nodes], face.uv_box, self.targets.limit)
         off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
-        uv, error = [cls.uv[nodes], grid.uv], [at_nodes, np.maximum(off - grid.slack, 0.0)]
-        for use in face.uses:
-            if edges[use.edge].degenerate:
-                continue
-            uv.append(use.uv)
-            cold = surface_distances(morph.surface, evaluate_curve(edge_morphs[use.edge].curve, use.t), use.uv,
-                                     face.uv_box)
-            hot = surface_distances(face.surface, evaluate_curve(edges[use.edge].curve, use.t), use.uv,
-                                    face.uv_box)
-            error.append(np.maximum(cold - hot, 0.0))
-        between = np.concatenate(error[1:])
-        return FaceErrors(np.concatenate(uv), np.concatenate(error), _largest(at_nodes), _largest(between))
+        uses = self._measured_uses(k)
+        uv_edges = np.concatenate([use.uv for use in uses]) if uses else np.zeros((0, 2))
+        cold = _curves_off(morph.surface, [self.edges[use.edge].curve for use in uses], uses, face.uv_box)
+        if k not in self.hot_gaps:          # the hot edges' own gaps: the knots refinement inserts keep them
+            hot = self.hot_faces[k].surface
+            self.hot_gaps[k] = _curves_off(hot, [self.hot_edges[use.edge].curve for use in uses], uses, face.uv_box)
+        between = np.concatenate([np.maximum(off - grid.slack, 0.0), np.maximum(cold - self.hot_gaps[k], 0.0)])
+        return FaceErrors(np.concatenate([cls.uv[nodes], grid.uv, uv_edges]), np.concatenate([at_nodes, between]),
+                          _largest(at_nodes), _largest(between))
+
+    def _measured_uses(self, k: int) -> list:
+        """The uses of face ``k``'s edges measured in :meth:`_face_errors` (all but degenerate edges')."""
+        return [use for use in self.part.faces[k].uses if not self.part.edges[use.edge].degenerate]
 
     def _edge_errors(self, e: int) -> EdgeErrors:
         return _edge_errors(self.part.edges[e], self.edges[e], self.cls, self.field, self.targets.edge_grids[e])
