@@ -309,6 +309,55 @@ def test_zero_kink_added_moves_no_corner(blade_part):
     assert all(r.reason == "no kink added" for r in reports)
 
 
+def test_corners_touched_are_the_ends_and_what_a_short_edge_turns_at_its_far_end(blade_part):
+    """An edge's refit touches the corners at its ends; an edge there of three poles or fewer (whose pole next to
+    one end is next to the other too) carries the change to its far end."""
+    from hot2cold.pipeline.g1 import corners_touched
+    part = blade_part
+    curves = [e.curve for e in part.edges]
+    e = next(e for e in part.edges if not e.degenerate and e.vertices[0] != e.vertices[1])
+    ends = set(e.vertices)
+    assert all(c is None or c.n_poles > 3 for c in curves)          # the blade's edges: no short ones
+    assert corners_touched(part, curves, {e.index}) == ends
+    # make the other edges at one end lines of three poles: their far ends are touched too
+    v = e.vertices[0]
+    short = [f for f in part.vertex_edges[v] if f != e.index and curves[f] is not None]
+    for f in short:
+        c = curves[f]
+        curves[f] = BSplineCurve(c.poles[[0, len(c.poles) // 2, -1]], np.r_[[c.knots[0]] * 3, [c.knots[-1]] * 3], 2)
+    far = {w for f in short for w in part.edges[f].vertices}
+    assert far - ends and corners_touched(part, curves, {e.index}) >= ends | far
+
+
+def test_refitting_no_edge_moves_no_corner(blade_part):
+    """The corner correction is no projection (run on its own output it may move an edge again), so a refit of
+    no edge leaves every curve object as it was, and a refit of one edge moves only edges at its corners."""
+    from hot2cold.pipeline.g1 import corners_touched, correct_corners
+    part = blade_part
+    found = tangent_edges(part)
+    curves = [e.curve for e in part.edges]
+    rng = np.random.default_rng(5)
+    bent = []
+    for e in part.edges:
+        if e.index in {te.edge for te in found} or e.degenerate:
+            continue
+        poles = e.curve.poles.copy()
+        poles[1] += 0.02 * np.linalg.norm(poles[1] - poles[0]) * rng.normal(size=3)
+        poles[-2] += 0.02 * np.linalg.norm(poles[-2] - poles[-1]) * rng.normal(size=3)
+        curves[e.index] = e.curve.with_poles(poles)
+        bent.append(e.index)
+    one = bent[0]
+    touched = corners_touched(part, curves, {one})
+    corrected, reports = correct_corners(part, curves, found, vertices=touched)
+    assert reports and {r.vertex for r in reports} <= touched
+    moved = {k for k, (a, b) in enumerate(zip(curves, corrected)) if a is not b}
+    assert one in moved
+    assert all(set(part.edges[k].vertices) & touched for k in moved)
+    assert set(bent) - moved                                      # bent edges elsewhere stay bent
+    unmoved, none = correct_corners(part, curves, found, vertices=set())
+    assert all(a is b for a, b in zip(unmoved, curves)) and none == []
+
+
 def _untwist(nodes, rate, stretch):
     from hot2cold.testing.synthetic import UntwistField
     return UntwistField.over(nodes, rate, stretch)
