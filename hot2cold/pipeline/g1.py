@@ -802,9 +802,9 @@ def _spread(normals: dict) -> float:
     return max((_line_angle(a, b) for i, a in enumerate(vals) for b in vals[i + 1:]), default=0.0)
 
 
-def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],
+def correct_corners(part: Part, curves: list[BSplineCurve | None], edges: list[TangentEdge],  # noqa: PLR0913
                     anchors: dict | None = None, decided: set[tuple[int, int]] | None = None, strain: float = 0.0,
-                    vertices: set[int] | None = None) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
+                    *, vertices: set[int] | None = None) -> tuple[list[BSplineCurve | None], list[CornerReport]]:
     """Give the morphed edges at each vertex of a tangent edge one common tangent plane.
 
     Parameters
