@@ -319,7 +319,7 @@ def test_corners_touched_are_the_ends_and_what_a_short_edge_turns_at_its_far_end
     ends = set(e.vertices)
     assert all(c is None or c.n_poles > 3 for c in curves)          # the blade's edges: no short ones
     assert corners_touched(part, curves, {e.index}) == ends
-    # make the other edges at one end lines of three poles: their far ends are touched too
+    # make the other edges at one end quadratics of three poles: their far ends are touched too
     v = e.vertices[0]
     short = [f for f in part.vertex_edges[v] if f != e.index and curves[f] is not None]
     for f in short:
@@ -329,9 +329,9 @@ def test_corners_touched_are_the_ends_and_what_a_short_edge_turns_at_its_far_end
     assert far - ends and corners_touched(part, curves, {e.index}) >= ends | far
 
 
-def test_refitting_no_edge_moves_no_corner(blade_part):
-    """The corner correction is no projection (run on its own output it may move an edge again), so a refit of
-    no edge leaves every curve object as it was, and a refit of one edge moves only edges at its corners."""
+def test_corners_corrected_at_given_vertices_only(blade_part):
+    """The corner correction is no projection (run on its own output it may move an edge again), so it corrects
+    only the corners asked for: those one edge touches move only edges there, and none asked moves none."""
     from hot2cold.pipeline.g1 import corners_touched, correct_corners
     part = blade_part
     found = tangent_edges(part)
