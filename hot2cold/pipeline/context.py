@@ -156,6 +156,6 @@ class MorphContext:
         if self.tangent and refined:
             curves = [m.curve for m in edge_morphs]
             curves, _ = correct_corners(part, curves, self.tangent, decided=edge_decided(part), strain=self.strain,
-                                        vertices=corners_touched(part, curves, set(refined)))
+                                        vertices=corners_touched(part, curves, refined))
             edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
         return edge_morphs

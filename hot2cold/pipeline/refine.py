@@ -309,13 +309,14 @@ class EdgeErrors(NamedTuple):
     between: float
 
 
-def _curves_off(surface: BSplineSurface, curves: list[BSplineCurve], uses: list, box) -> np.ndarray:
+def _curves_off(surface: BSplineSurface, curves: list[BSplineCurve], uses: list, uv: np.ndarray, box) -> np.ndarray:
     """The distances ``(m,)`` from ``surface`` of the points of ``curves`` at each of the edge ``uses``'
-    parameters ``use.t``, each projected from ``use.uv`` (in face ``box``), all in one projection."""
+    parameters ``use.t``, each projected from its pcurve's point, ``uv (m, 2)`` (the uses' ``uv`` in turn, in face
+    ``box``), all in one projection."""
     if not uses:
         return np.zeros(0)
     points = np.concatenate([evaluate_curve(curve, use.t) for curve, use in zip(curves, uses)])
-    return surface_distances(surface, points, np.concatenate([use.uv for use in uses]), box)
+    return surface_distances(surface, points, uv, box)
 
 
 def _edge_errors(edge: Edge, morph: EdgeMorph, cls: Classification, field: DisplacementField,
@@ -694,19 +695,15 @@ class _Refining:
         target = cls.foot[nodes] + field.displacements[nodes]
         at_nodes = surface_distances_above(morph.surface, target, cls.uv[nodes], face.uv_box, self.targets.limit)
         off = surface_distances(morph.surface, grid.expected, grid.uv, face.uv_box, past_border=True)
-        uses = self._measured_uses(k)
+        uses = [use for use in face.uses if not self.part.edges[use.edge].degenerate]
         uv_edges = np.concatenate([use.uv for use in uses]) if uses else np.zeros((0, 2))
-        cold = _curves_off(morph.surface, [self.edges[use.edge].curve for use in uses], uses, face.uv_box)
+        cold = _curves_off(morph.surface, [self.edges[use.edge].curve for use in uses], uses, uv_edges, face.uv_box)
         if k not in self.hot_gaps:          # the hot edges' own gaps: the knots refinement inserts keep them
-            hot = self.hot_faces[k].surface
-            self.hot_gaps[k] = _curves_off(hot, [self.hot_edges[use.edge].curve for use in uses], uses, face.uv_box)
+            self.hot_gaps[k] = _curves_off(self.hot_faces[k].surface, [self.hot_edges[use.edge].curve for use in uses],
+                                           uses, uv_edges, face.uv_box)
         between = np.concatenate([np.maximum(off - grid.slack, 0.0), np.maximum(cold - self.hot_gaps[k], 0.0)])
         return FaceErrors(np.concatenate([cls.uv[nodes], grid.uv, uv_edges]), np.concatenate([at_nodes, between]),
                           _largest(at_nodes), _largest(between))
-
-    def _measured_uses(self, k: int) -> list:
-        """The uses of face ``k``'s edges measured in :meth:`_face_errors` (all but degenerate edges')."""
-        return [use for use in self.part.faces[k].uses if not self.part.edges[use.edge].degenerate]
 
     def _edge_errors(self, e: int) -> EdgeErrors:
         return _edge_errors(self.part.edges[e], self.edges[e], self.cls, self.field, self.targets.edge_grids[e])
