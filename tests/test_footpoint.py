@@ -89,6 +89,32 @@ def test_newton_checks_its_input():
         project_to_surface(surface, np.zeros((4, 3)), np.zeros((3, 2)))
 
 
+def test_nodes_started_at_one_point_share_its_jet(monkeypatch):
+    """Nodes started at the same point of a start grid (a dense field: many nodes to a start) take that point's
+    jet from one evaluation: the foot points are those found with each node's jet evaluated on its own."""
+    import hot2cold.core.footpoint as footpoint
+
+    part = load_part(SAMPLES / "twisted_blade.step", Settings())
+    face = part.faces[0]
+    rng = np.random.default_rng(3)
+    points, _ = _near_surface_nodes(face, 2000, 0.02, rng)
+    u0, u1, v0, v1 = face.uv_box
+    uu, vv = np.meshgrid(np.linspace(u0, u1, 40), np.linspace(v0, v1, 40), indexing="ij")
+    grid_uv = np.column_stack([uu.ravel(), vv.ravel()])                     # 1 600 starts for 2 000 nodes
+    start = grid_uv[cKDTree(evaluate_surface(face.surface, *grid_uv.T)).query(points)[1]]
+    assert len(np.unique(start, axis=0)) < 0.8 * len(start)
+    shared = project_to_surface(face.surface, points, start)
+    calls = []
+    jet = footpoint.surface_jet
+    monkeypatch.setattr(footpoint, "surface_jet", lambda s, u, v: calls.append(len(u)) or jet(s, u, v))
+    monkeypatch.setattr(footpoint, "_SHARED_LEAST", len(points) + 1)        # every node evaluated on its own
+    alone = project_to_surface(face.surface, points, start)
+    assert calls[0] == len(points)
+    assert np.array_equal(shared.settled, alone.settled) and shared.settled.mean() > 0.95
+    assert np.abs(shared.uv - alone.uv).max() <= 1e-12 * np.ptp(grid_uv, axis=0).max()
+    assert np.abs(shared.distance - alone.distance).max() <= 1e-12 * part.diagonal
+
+
 def _near_edge_points(curve, n: int, offset: float, rng) -> tuple[np.ndarray, np.ndarray]:
     """``n`` points ``(n, 3)`` up to ``offset`` mm off ``curve`` (inside its range, away from its ends), and the
     parameters ``(n,)`` of the nearest of 200 samples of the curve, Newton's starts."""

@@ -188,6 +188,36 @@ def test_linear_pinv_from_the_span_is_numpy_s(shape):
     assert np.abs(got - expected).max() <= 1e-10 * np.abs(expected).max()
 
 
+def test_local_fits_over_whole_neighbourhoods_skip_only_the_mask(monkeypatch):
+    """Neighbourhoods whose rows are all valid are fitted without multiplying by the mask (a pass over the arrays
+    spared): the same numbers as the masked path gives them, and a row left out still counts for nothing."""
+    import hot2cold.core.localfit as localfit
+
+    c, m = 40, 20
+    pts = RNG.normal(size=(c, m, 3)) * [3.0, 2.0, 0.01]
+    values = RNG.normal(size=(c, m, 3))
+    x = RNG.normal(size=(c, 3))
+    every = np.ones((c, m), bool)
+    spared = localfit.fits_at(pts, values, every, x, True, 1e-9)
+    multiply = localfit._masked
+
+    def always(valid):
+        w = valid[..., None].astype(float)
+        return lambda a: a * w
+
+    monkeypatch.setattr(localfit, "_masked", always)
+    masked = localfit.fits_at(pts, values, every, x, True, 1e-9)
+    for a, b in zip(spared, masked):
+        assert np.array_equal(a, b)          # x * 1.0 is x: the same numbers, not close ones
+    monkeypatch.setattr(localfit, "_masked", multiply)
+    valid = every.copy()
+    valid[:, 0] = False
+    moved = values.copy()
+    moved[:, 0] += 1e3                       # a row left out moves nothing
+    for a, b in zip(localfit.fits_at(pts, values, valid, x, True), localfit.fits_at(pts, moved, valid, x, True)):
+        assert np.array_equal(a, b)
+
+
 def test_field_estimator_handles_coplanar_points():
     xy = RNG.uniform(0, 10, (100, 2))
     pts = np.column_stack([xy, np.full(100, 2.0)])

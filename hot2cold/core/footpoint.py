@@ -93,6 +93,20 @@ def project_to_surface(surface: BSplineSurface, points: np.ndarray, start: np.nd
     return FootPoints(uv, distance, settled)
 
 
+#: A chunk of at least this many nodes evaluates its starts' jets once per distinct start (:func:`_shared_jet`).
+_SHARED_LEAST = 64
+
+
+def _shared_jet(surface: BSplineSurface, uv: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`~hot2cold.core.bspline.surface_jet` at ``uv (m, 2)``, each distinct parameter pair evaluated once:
+    the nodes of a field denser than a face's start grid start at its points, many of them at the same one."""
+    if len(uv) >= _SHARED_LEAST:
+        distinct, at = np.unique(np.ascontiguousarray(uv).view(np.complex128).ravel(), return_inverse=True)
+        if len(distinct) < len(uv):
+            return tuple(x[at] for x in surface_jet(surface, distinct.real, distinct.imag))
+    return surface_jet(surface, uv[:, 0], uv[:, 1])
+
+
 def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     """Newton iteration on ``g = 0`` for one chunk; returns ``uv (m, 2)``, ``distance (m,)``, ``settled (m,)``."""
     m = len(p)
@@ -105,7 +119,8 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
     for iteration in range(MAX_ITERATIONS):
         if not len(active):
             break
-        s, su, sv, suu, suv, svv = surface_jet(surface, uv[active, 0], uv[active, 1])
+        s, su, sv, suu, suv, svv = (_shared_jet(surface, uv) if iteration == 0
+                                    else surface_jet(surface, uv[active, 0], uv[active, 1]))
         r = s - p[active]
         if iteration == 0:
             start_distance = np.linalg.norm(r, axis=1)

@@ -109,6 +109,15 @@ def evaluate_node_fits(coef: np.ndarray, scale: np.ndarray, offsets: np.ndarray)
     return np.einsum("nf,nfc->nc", monomials(offsets / scale[:, None]), coef)
 
 
+def _masked(valid: np.ndarray):
+    """``mask(x)``: the rows ``(c, m, ...)`` of ``x`` where ``valid (c, m)`` is False set to 0 (by multiplying them
+    by 0, the others by 1); where every row is valid, ``x`` itself (a pass over the arrays spared)."""
+    if valid.all():
+        return lambda x: x
+    w = valid[..., None].astype(float)
+    return lambda x: x * w
+
+
 class Span(NamedTuple):
     """The spread of neighbourhoods ``(c, m, 3)`` about their centroids, from one batched SVD: ``centre (c,
     3)``, ``count (c,)`` the rows taken, ``scale (c,)`` (:func:`offset_scale`), the scaled offsets ``(c, m,
@@ -125,15 +134,15 @@ class Span(NamedTuple):
     @classmethod
     def of(cls, points: np.ndarray, valid: np.ndarray) -> Span:
         """The span of ``points (c, m, 3)``, rows where ``valid (c, m)`` is False left out."""
-        w = valid[..., None].astype(float)
+        mask = _masked(valid)
         count = np.maximum(valid.sum(axis=1), 1)
-        centre = (points * w).sum(axis=1) / count[:, None]
-        offsets = (points - centre[:, None, :]) * w
+        centre = mask(points).sum(axis=1) / count[:, None]
+        offsets = mask(points - centre[:, None, :])
         # centred again, so that they sum to zero to their own rounding (not the positions'): the column of
         # ones stays orthogonal to them however small the neighbourhood (linear_pinv relies on it)
         shift = offsets.sum(axis=1) / count[:, None]
         centre = centre + shift
-        offsets = (offsets - shift[:, None, :]) * w
+        offsets = mask(offsets - shift[:, None, :])
         # a neighbourhood that spreads by no more than the rounding of its positions is one point
         size = np.abs(offsets).max(axis=(1, 2))
         offsets[size <= _SAME_POINT * np.abs(centre).max(axis=1)] = 0.0
@@ -200,11 +209,11 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     face, would move points that the clamp and every node on it hold still.
     """
     span = Span.of(points, valid)
-    w = valid[..., None].astype(float)
+    mask = _masked(valid)
     offsets = span.offsets
     at = (x - span.centre) / span.scale[:, None]
-    values = values * w
-    linear = monomials(offsets, 1) * w                                          # (c, m, 4)
+    values = mask(values)
+    linear = mask(monomials(offsets, 1))                                         # (c, m, 4)
     linear_pinv = span.linear_pinv(valid.astype(float))                         # (c, 4, m)
     coef = linear_pinv @ values                                                 # (c, 4, 3)
     at_linear = monomials(at, 1)                                                # (c, 4)
