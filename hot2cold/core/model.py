@@ -276,7 +276,7 @@ class Classification:
         """Distance (mm) from each used node's foot point to the nearest other foot point ``(N,)`` (NaN for
         unused nodes, and for all where fewer than two foot points are distinct): the field's node spacing
         there.  Nodes that share a foot point count once."""
-        from .trees import kd_tree
+        from .trees import kd_tree, query
 
         used = np.flatnonzero(self.used)
         nearest = np.full(len(self.role), np.nan)
@@ -284,14 +284,14 @@ class Classification:
         if len(feet) < 2:
             return nearest
         tree = kd_tree(feet)
-        found = tree.query(feet, k=2, workers=-1)[0][:, 1]
+        found = query(tree, feet, k=2)[0][:, 1]
         # a foot point shared by several nodes (a vertex's, one node's in two solids): farther neighbours, up
         # to the nearest one elsewhere (none where all are one point)
         shared = np.flatnonzero(found == 0.0)
         k = 2
         while len(shared) and k < len(feet):
             k = min(4 * k, len(feet))
-            dist = tree.query(feet[shared], k=k, workers=-1)[0].reshape(len(shared), k)
+            dist = query(tree, feet[shared], k=k)[0].reshape(len(shared), k)
             apart = dist > 0.0
             done = apart.any(axis=1)
             found[shared[done]] = dist[done, apart[done].argmax(axis=1)]

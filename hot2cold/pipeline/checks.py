@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..core.trees import kd_tree
+from ..core.trees import kd_tree, query
 from ..core.bspline import (NORMAL_RTOL, cross, evaluate_surface, surface_basis,
                             surface_derivative_bases)
 from ..core.footpoint import project_to_surface, surface_distances
@@ -556,7 +556,7 @@ def _strain(points: np.ndarray, disp: np.ndarray) -> float:
     best, strain = -1.0, 0.0
     for start in range(0, len(points), _STRAIN_CHUNK):
         these = slice(start, start + _STRAIN_CHUNK)
-        d, j = tree.query(points[these], k=k, workers=-1)
+        d, j = query(tree, points[these], k=k)
         d, j = d[:, 1:], j[:, 1:]
         du = disp[j] - disp[these, None, :]                                        # (c, k - 1, 3)
         # the largest ratio found on the squares (no square root per pair), then taken as it is

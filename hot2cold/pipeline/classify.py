@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.threads import map_threads
-from ..core.trees import kd_tree
+from ..core.trees import kd_tree, query
 from ..core.bspline import (bend_parameters, evaluate_curve, evaluate_surface, grid_points, polyline_length,
                             surface_normals)
 from ..io.field import DisplacementField
@@ -170,7 +170,7 @@ def _clearance(tree: cKDTree, owner: np.ndarray, k: int) -> np.ndarray:
     """Per sample of ``tree`` (``(m,)``, mm): how far at least the nearest sample of another owner lies, the
     distance to it among the sample's ``k`` nearest, or to the ``k``-th nearest where none of them is
     another owner's."""
-    dist, idx = tree.query(tree.data, k=k, workers=-1)
+    dist, idx = query(tree, tree.data, k=k)
     dist, idx = dist.reshape(tree.n, k), idx.reshape(tree.n, k)
     other = owner[idx] != owner[:, None]
     first = other.argmax(axis=1)
@@ -195,12 +195,12 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
     Returns ``point (c,)`` and ``owner (c,)``, sorted by owner and then point.
     """
     k = min(k, tree.n)
-    d0, i0 = tree.query(points, k=1, workers=-1)
+    d0, i0 = query(tree, points)
     alone = (_clearance(tree, owner, k)[i0] > 2.0 * d0 + margin) & (d0 <= reach + margin)
     one = np.flatnonzero(alone)
     keys = [owner[i0[one]].astype(np.int64) * len(points) + one]
     rest = np.flatnonzero(~alone)
-    dist, idx = tree.query(points[rest], k=k, workers=-1)
+    dist, idx = query(tree, points[rest], k=k)
     dist, idx = dist.reshape(len(rest), k), idx.reshape(len(rest), k)
     keep = (dist <= dist[:, :1] + margin) & (dist[:, :1] <= reach + margin)
     own = np.where(keep, owner[idx], -1)
@@ -315,12 +315,12 @@ def _foot_points(face, points: np.ndarray, start: tuple[np.ndarray, np.ndarray, 
     surface = face.surface
     grid, grid_uv, tree = start
     k = min(_FAR_SIDE_STARTS, len(grid))
-    _, first = tree.query(points, k=1, workers=-1)
+    _, first = query(tree, points)
     fp = project_to_surface(surface, points, grid_uv[first], box)
     ask = np.flatnonzero(~(fp.settled & (fp.distance <= on_surface)))
     if k < 2 or not len(ask):
         return fp
-    _, near = tree.query(points[ask], k=k, workers=-1)
+    _, near = query(tree, points[ask], k=k)
     near = near.reshape(len(ask), k)
     used = np.zeros(len(grid), bool)                          # the normals of those starts only
     used[near.ravel()] = used[first[ask]] = True
@@ -452,7 +452,7 @@ class _Boundary:
         from the nearest of the edge's samples, the kernel where it does not settle."""
         curve = part.edges[e].curve
         mine = np.flatnonzero(self.sample_edge == e)
-        _, nearest = cKDTree(self.samples.data[mine]).query(points, k=1, workers=-1)
+        _, nearest = query(cKDTree(self.samples.data[mine]), points)
         feet = project_to_curve(curve, points, self.sample_t[mine][nearest])
         t, distance = feet.t.copy(), feet.distance.copy()
         domain = np.array(curve.domain)
@@ -488,8 +488,8 @@ def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classific
     in_group[faces] = True
     if boundary.vertices is not None:
         # (only the nodes within reach are looked for: the others come back at inf, index len(vertices))
-        d_v, v_idx = boundary.vertices.query(points[used], distance_upper_bound=np.nextafter(edge_distance, np.inf),
-                                             workers=-1)
+        d_v, v_idx = query(boundary.vertices, points[used],
+                           distance_upper_bound=np.nextafter(edge_distance, np.inf))
         at_vertex = d_v <= edge_distance
         v_idx = np.minimum(v_idx, len(part.vertices) - 1)
         if len(stray):
@@ -506,7 +506,7 @@ def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classific
     if boundary.samples is None or len(used) == 0:
         return
     tree, sample_edge, h = boundary.samples, boundary.sample_edge, boundary.h
-    near, _ = tree.query(points[used], distance_upper_bound=np.nextafter(edge_distance + h, np.inf), workers=-1)
+    near, _ = query(tree, points[used], distance_upper_bound=np.nextafter(edge_distance + h, np.inf))
     close = used[near <= edge_distance + h]
     pair_node, pair_edge = _candidates(tree, sample_edge, points[close], edge_distance, h)
     best = np.full(len(points), np.inf)

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..core.threads import map_threads
-from ..core.trees import kd_tree
+from ..core.trees import kd_tree, query
 from ..core.bspline import evaluate_curve, evaluate_surface, knot_breaks
 from .classify import curve_length
 from ..io.field import DisplacementField
@@ -164,7 +164,7 @@ class _FaceNodes:
         asked for those nodes only (a face's grid is sparser than its nodes)."""
         if not len(points):
             return np.zeros(0), np.zeros(0)
-        closest = self.tree.query(points, k=min(_SLACK_NODES, len(self.nodes)), workers=-1)[1]
+        closest = query(self.tree, points, k=min(_SLACK_NODES, len(self.nodes)))[1]
         closest = closest.reshape(len(points), -1)
         asked, at = np.unique(closest, return_inverse=True)
         at = at.reshape(closest.shape)
@@ -265,7 +265,7 @@ class FaceGridder:
             mine = face_nodes.of(part, face)
             reach = mine.reach
             if len(uv) and len(mine.nodes) and np.isfinite(reach):
-                node_distance = mine.tree.query(hot, workers=-1)[0]
+                node_distance = query(mine.tree, hot)[0]
                 near = node_distance <= reach
                 if near.any() and mine.own:
                     own = near
