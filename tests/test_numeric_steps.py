@@ -244,6 +244,20 @@ def test_side_detection(uv, expected):
     assert side_along(_surface(), EdgeUse(edge=0, t=np.linspace(0, 1, len(uv)), uv=uv)) == expected
 
 
+def test_side_detection_is_kept_per_domain():
+    """A use's side is kept for the domain it was asked about: asked again (with other poles on the same
+    knots), the same answer; asked about another domain, that domain's answer, each as found afresh."""
+    surface = _surface()
+    use = EdgeUse(edge=0, t=np.linspace(0, 1, 5), uv=np.column_stack([np.ones(5), np.linspace(0, 1, 5)]))
+    assert side_along(surface, use) == ("u1", False)
+    assert side_along(surface.with_poles(surface.poles + 1.0), use) == ("u1", False)
+    wider = BSplineSurface(surface.poles, surface.u_knots * 2.0, surface.v_knots, 3, 2)    # u in [0, 2]
+    assert side_along(wider, use) is None
+    assert side_along(wider, use, whole=False) is None
+    assert side_along(surface, use, whole=False) == ("u1", False)
+    assert side_along(surface, use) == ("u1", False)
+
+
 def test_sparse_patches_get_a_grid_of_artificial_nodes():
     surface = _surface()                                  # 2 x 3 patches of degrees (3, 2)
     full = np.column_stack([np.repeat(np.linspace(0.01, 0.49, 4), 3), np.tile(np.linspace(0.01, 0.29, 3), 4)])

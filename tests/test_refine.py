@@ -713,3 +713,12 @@ def test_a_node_the_field_around_it_does_not_follow_is_not_chased(blade_1mm):
         if r["face"] != 0 and r["face"] in others:
             assert r["net_after"] == others[r["face"]]["net_after"]
 
+
+
+def test_the_rebuild_inserts_the_knots_the_kernel_lacks_counting_multiplicities():
+    from hot2cold.kernel.rebuild import _insert_missing
+
+    inserted = []
+    _insert_missing([0.0] * 4 + [0.5] + [1.0] * 4, np.array([0.0] * 4 + [0.25, 0.5, 0.5, 0.75] + [1.0] * 4),
+                    lambda *args: inserted.append(args))
+    assert inserted == [(0.25, 1, 0.0, True), (0.5, 1, 0.0, True), (0.75, 1, 0.0, True)]

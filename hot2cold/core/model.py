@@ -165,17 +165,29 @@ def side_along(surface: BSplineSurface, use: EdgeUse, rel_tol: float = 1e-9,
     when it lies on no side.
 
     ``use.uv`` (m, 2) is taken to lie on a side when its fixed parameter stays within ``rel_tol`` times the
-    domain's span of the side's value.
+    domain's span of the side's value.  The answer depends on the domain alone (a face's fits and refinements
+    keep it), and is kept on the use for each domain asked about: the fits, the refinement and G1 ask for the
+    same uses round after round.
     """
-    u0, u1, v0, v1 = surface.domain
+    key = (surface.domain, rel_tol, whole)
+    known = use.__dict__.setdefault("_sides", {})           # (a frozen dataclass: its __dict__ takes a cache)
+    if key not in known:
+        known[key] = _side_along(key[0], use.uv, rel_tol, whole)
+    return known[key]
+
+
+def _side_along(domain: tuple[float, float, float, float], uv: np.ndarray, rel_tol: float, whole: bool
+                ) -> tuple[Side, bool] | None:
+    """:func:`side_along` of the pcurve ``uv (m, 2)`` on the parameter box ``domain``."""
+    u0, u1, v0, v1 = domain
     span = np.array([u1 - u0, v1 - v0])
     for side in Side:
         axis = side.axis
         fixed_value = (u0, u1, v0, v1)[2 * axis + side.end]
         along = 1 - axis
         lo, hi = (u0, v0)[along], (u1, v1)[along]
-        if np.all(np.abs(use.uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
-            a, b = use.uv[0, along], use.uv[-1, along]
+        if np.all(np.abs(uv[:, axis] - fixed_value) <= rel_tol * span[axis]):
+            a, b = uv[0, along], uv[-1, along]
             if not whole or (min(a, b) <= lo + rel_tol * span[along] and max(a, b) >= hi - rel_tol * span[along]):
                 return side, bool(a > b)
     return None

@@ -13,6 +13,7 @@ morphed edges.
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,13 +47,15 @@ class ColdKernel:
     vertices: list
 
 
-def _insert_missing(flat: list, knots, insert) -> None:
-    have = list(flat)
-    for x in knots:
-        if x in have:
-            have.remove(x)
+def _insert_missing(flat, knots, insert) -> None:
+    """Insert each of ``knots`` (a record's full knot vector) that the kernel's full knot sequence ``flat`` lacks
+    (multiplicities counted) by ``insert(knot, 1, 0.0, True)``, in order."""
+    have = Counter(float(x) for x in flat)
+    for x in map(float, knots):
+        if have[x] > 0:
+            have[x] -= 1
         else:
-            insert(float(x), 1, 0.0, True)
+            insert(x, 1, 0.0, True)
 
 
 def _refine_surface(surface, record: BSplineSurface) -> None:
