@@ -31,7 +31,7 @@ from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Shape
 
 from ..errors import KernelError
-from .explore import bspline_curve, bspline_surface, diagonal, edges_of, index_map, shape_map
+from .explore import bspline_curve, bspline_surface, diagonal, edges_of, index_map, reals, shape_map
 from .faults import describe_face, face_faults
 from .repair import face_valid, fix_faces, mend_face, pcurve_spline
 
@@ -173,7 +173,7 @@ def _on_same_points(surface, converted_surface, pcurve, ts, tol: float) -> bool:
 def _identical(a, b) -> bool:
     """Whether the 2D B-splines ``a`` and ``b`` have the same degree, knots and poles (to rounding)."""
     if not (isinstance(b, Geom2d_BSplineCurve) and a.Degree() == b.Degree() and a.NbPoles() == b.NbPoles()
-            and list(a.KnotSequence()) == list(b.KnotSequence())):
+            and reals(a.KnotSequence()) == reals(b.KnotSequence())):
         return False
     poles = [(a.Pole(i), b.Pole(i)) for i in range(1, a.NbPoles() + 1)]
     scale = 1.0 + max(abs(c) for p, _ in poles for c in (p.X(), p.Y()))
@@ -330,10 +330,10 @@ def _set_origin(surface: Geom_BSplineSurface, d: int, at: float, tol: float) -> 
     """Make ``at`` the first parameter of the periodic direction ``d`` of ``surface`` (same geometry)."""
     if d == 0:
         surface.InsertUKnot(at, 1, tol, True)
-        knots = list(surface.UKnots())
+        knots = reals(surface.UKnots())
     else:
         surface.InsertVKnot(at, 1, tol, True)
-        knots = list(surface.VKnots())
+        knots = reals(surface.VKnots())
     index = int(np.argmin(np.abs(np.asarray(knots) - at))) + 1
     if d == 0:
         surface.SetUOrigin(index)
@@ -374,8 +374,8 @@ def _normalise_surface(surface: Geom_BSplineSurface) -> None:
         surface.SetUNotPeriodic()
     if surface.IsVPeriodic():
         surface.SetVNotPeriodic()
-    uk = list(surface.UKnotSequence())
-    vk = list(surface.VKnotSequence())
+    uk = reals(surface.UKnotSequence())
+    vk = reals(surface.VKnotSequence())
     if not (_clamped(uk, surface.UDegree()) and _clamped(vk, surface.VDegree())):
         u0, u1, v0, v1 = surface.Bounds()
         surface.Segment(u0, u1, v0, v1)
@@ -385,7 +385,7 @@ def _normalise_curve(curve: Geom_BSplineCurve, first: float, last: float) -> Non
     """Make an edge's curve non-periodic, clamped and exactly the edge's range, in place."""
     if curve.IsPeriodic():
         curve.SetNotPeriodic()
-    knots = list(curve.KnotSequence())
+    knots = reals(curve.KnotSequence())
     if (not _clamped(knots, curve.Degree()) or curve.FirstParameter() != first
             or curve.LastParameter() != last):
         curve.Segment(first, last)

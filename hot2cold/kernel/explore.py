@@ -25,6 +25,13 @@ def shape_map(shape: TopoDS_Shape, kind) -> list:
     return [cast(m.FindKey(i)) for i in range(1, m.Size() + 1)]
 
 
+def reals(array) -> list[float]:
+    """The values of an OCCT array of reals (``TColStd_Array1OfReal``: a knot sequence, knots), in order, read
+    one by one: Python's own iteration over such an array is far slower (a part of hundreds of faces reads
+    thousands)."""
+    return [array.Value(i) for i in range(array.Lower(), array.Upper() + 1)]
+
+
 def edges_of(shape: TopoDS_Shape, once: bool = False) -> list:
     """The edges of ``shape`` as ``TopExp_Explorer`` meets them, oriented as they are used there (a seam of a
     face twice, once each way); with ``once``, each edge once (its first use)."""

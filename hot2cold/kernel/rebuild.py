@@ -26,7 +26,7 @@ from OCP.TopoDS import TopoDS_Shape
 from ..core.bspline import BSplineCurve, BSplineSurface
 from ..errors import KernelError
 from .convert import set_curve_poles, set_surface_poles
-from .explore import bspline_curve, bspline_surface, shape_map
+from .explore import bspline_curve, bspline_surface, reals, shape_map
 from .topology import KernelPart
 
 log = logging.getLogger(__name__)
@@ -47,7 +47,7 @@ class ColdKernel:
     vertices: list
 
 
-def _insert_missing(flat, knots, insert) -> None:
+def _insert_missing(flat: list[float], knots, insert) -> None:
     """Insert each of ``knots`` (a record's full knot vector) that the kernel's full knot sequence ``flat`` lacks
     (multiplicities counted) by ``insert(knot, 1, 0.0, True)``, in order."""
     have = Counter(float(x) for x in flat)
@@ -66,8 +66,8 @@ def _refine_surface(surface, record: BSplineSurface) -> None:
     curves on the face, which the kernel finds by the face's surface handle."""
     if record.u_degree > surface.UDegree() or record.v_degree > surface.VDegree():
         surface.IncreaseDegree(max(record.u_degree, surface.UDegree()), max(record.v_degree, surface.VDegree()))
-    _insert_missing(surface.UKnotSequence(), record.u_knots, surface.InsertUKnot)
-    _insert_missing(surface.VKnotSequence(), record.v_knots, surface.InsertVKnot)
+    _insert_missing(reals(surface.UKnotSequence()), record.u_knots, surface.InsertUKnot)
+    _insert_missing(reals(surface.VKnotSequence()), record.v_knots, surface.InsertVKnot)
 
 
 def _refine_curve(curve, record: BSplineCurve) -> None:
@@ -75,7 +75,7 @@ def _refine_curve(curve, record: BSplineCurve) -> None:
     (in place, as :func:`_refine_surface`; the record's poles are written afterwards)."""
     if record.degree > curve.Degree():
         curve.IncreaseDegree(record.degree)
-    _insert_missing(curve.KnotSequence(), record.knots, curve.InsertKnot)
+    _insert_missing(reals(curve.KnotSequence()), record.knots, curve.InsertKnot)
 
 
 def rebuild(kernel: KernelPart, surfaces: list[BSplineSurface], curves: list[BSplineCurve | None],
