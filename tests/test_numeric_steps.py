@@ -113,6 +113,31 @@ def test_displacements_carried_to_the_feet_are_exact_for_an_affine_field():
     np.testing.assert_array_equal(on, feet @ A.T + B - feet)
 
 
+def test_displacements_carried_together_are_those_carried_one_by_one():
+    """Several sets of displacements carried in one call of the estimator, with its estimate at more points, give
+    the numbers each gets on its own: an estimate at a point does not depend on the points asked with it."""
+    from hot2cold.pipeline.artificial import carried_together
+
+    pts = RNG.random((500, 3)) * 10
+    est = FieldEstimator(pts, 1e-3 * np.column_stack([pts[:, 0] ** 2, pts[:, 1] * pts[:, 2], np.sin(pts[:, 0])]), 20)
+    carries = []
+    for n in (5, 0, 17, 3):
+        at = RNG.random((n, 3)) * 10
+        to = at + RNG.normal(size=(n, 3)) * 0.01
+        to[:2] = at[:2]                                     # not apart: kept as given
+        carries.append((RNG.normal(size=(n, 3)), at, to))
+    also = RNG.random((30, 3)) * 10
+    together, at_also = carried_together(carries, est, 1e-6, also)
+    for (disp, at, to), got in zip(carries, together):
+        alone = disp.copy()
+        apart = np.linalg.norm(to - at, axis=1) > 1e-6
+        if apart.any():
+            alone[apart] += est(to[apart]) - est(at[apart])
+        assert np.array_equal(got, alone)
+    assert np.array_equal(at_also, est(also))
+    assert carried_together([(carries[0][0], carries[0][1], carries[0][1])], est, 1e-6)[0][0] is carries[0][0]
+
+
 def test_field_estimator_reaches_past_a_flat_neighbourhood():
     """A point beside a plane of foot points (its 20 nearest all on it) and far from the others: the field's
     change across the plane comes from the foot points that span it, and an affine field is exact there."""

@@ -221,14 +221,41 @@ def carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEs
     face's pcurve, a vertex's at its edges' curve ends, an edge's poles on a face's side row.  Across the part's
     own small gaps between those the field changes by its gradient times the gap; carried, an exactly affine
     field stays exact, and a node's own value (noise included) is kept but for that change."""
-    apart = np.linalg.norm(to - at, axis=1) > gap
-    if not apart.any():
-        return disp
-    out = np.array(disp, float)
-    n = int(apart.sum())
-    both = estimator(np.concatenate([to[apart], at[apart]]))        # one estimate for both ends (a call's cost)
-    out[apart] += both[:n] - both[n:]
-    return out
+    return carried_together([(disp, at, to)], estimator, gap)[0][0]
+
+
+def carried_together(carries: list[tuple[np.ndarray, np.ndarray, np.ndarray]], estimator: FieldEstimator,
+                     gap: float, also: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray | None]:
+    """:func:`carried` of each ``(disp (m, 3), at (m, 3), to (m, 3))`` of ``carries``, and the estimate ``(k, 3)``
+    at the points ``also (k, 3)`` (None: none), from one call of ``estimator`` for all of them: a call's cost is
+    mostly its own where a face asks for a few points along each of its edges.  The same numbers as a call
+    each (the estimate at a point does not depend on the others asked with it)."""
+    asked, apart = [], []
+    for disp, at, to in carries:
+        rows = np.linalg.norm(to - at, axis=1) > gap
+        apart.append(rows)
+        asked += [to[rows], at[rows]]
+    if also is not None:
+        asked.append(also)
+    estimates = estimated(estimator, *asked)
+    out = []
+    for j, ((disp, _, _), rows) in enumerate(zip(carries, apart)):
+        if not rows.any():
+            out.append(disp)
+            continue
+        moved = np.array(disp, float)
+        moved[rows] += estimates[2 * j] - estimates[2 * j + 1]
+        out.append(moved)
+    return out, (estimates[-1] if also is not None else None)
+
+
+def estimated(estimator: FieldEstimator, *points: np.ndarray) -> list[np.ndarray]:
+    """``[estimator(p) for p in points]`` (each ``(m_i, 3)`` at ``(m_i, 3)``) from one call of ``estimator``: the
+    same numbers (an estimate at a point does not depend on the others asked with it), at a call's cost."""
+    sizes = [len(p) for p in points]
+    if not sum(sizes):
+        return [np.zeros((n, 3)) for n in sizes]
+    return np.split(estimator(np.concatenate(points)), np.cumsum(sizes)[:-1])
 
 
 def carry_to_feet(points: np.ndarray, feet: np.ndarray, displacements: np.ndarray, used: np.ndarray,

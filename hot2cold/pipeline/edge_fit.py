@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
+from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried, estimated
 from ..core.bspline import BSplineCurve, curve_basis, evaluate_curve, knot_breaks, span_cells
 from ..io.field import DisplacementField
 from ..core.lstsq import solve_tsvd
@@ -101,8 +101,9 @@ def _field_prior(curve: BSplineCurve, end_disp: np.ndarray, estimator: FieldEsti
     :func:`hot2cold.pipeline.face_fit._field_prior`)."""
     t = span_cells(knot_breaks(curve.knots, curve.degree), curve.degree)[0]
     basis = curve_basis(curve, t).toarray()
-    rhs = estimator(evaluate_curve(curve, t)) - basis[:, [0, -1]] @ end_disp
-    return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=estimator(curve.poles[1:-1])).x
+    at_cells, at_poles = estimated(estimator, evaluate_curve(curve, t), curve.poles[1:-1])
+    rhs = at_cells - basis[:, [0, -1]] @ end_disp
+    return solve_tsvd(basis[:, 1:-1], rhs, PRIOR_EPSILON, prior=at_poles).x
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried
+from .artificial import GAP_SHARE, PRIOR_EPSILON, FieldEstimator, carried, carried_together, estimated
 from ..core.bspline import (BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks, span_cells,
                             surface_basis)
 from .edge_fit import EdgeMorph
@@ -186,9 +186,9 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
     u, v = (a.ravel() for a in np.meshgrid(tu, tv, indexing="ij"))
     basis = surface_basis(surface, u, v)
     flat = delta.reshape(-1, 3)
-    rhs = estimator(evaluate_surface(surface, u, v)) - basis[:, ~free] @ flat[~free]
-    return solve_tsvd(basis[:, free], rhs, PRIOR_EPSILON,
-                      prior=estimator(surface.poles.reshape(-1, 3)[free])).x
+    at_cells, at_poles = estimated(estimator, evaluate_surface(surface, u, v), surface.poles.reshape(-1, 3)[free])
+    rhs = at_cells - basis[:, ~free] @ flat[~free]
+    return solve_tsvd(basis[:, free], rhs, PRIOR_EPSILON, prior=at_poles).x
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,7 +231,7 @@ def face_problem(face: Face, part: Part, edge_morphs: list[EdgeMorph], inputs: F
     delta = np.zeros((nu, nv, 3))
     fixed = np.zeros((nu, nv), bool)
     tied = []
-    uv_rows, target_rows = [], []
+    uv_rows, carries = [], []          # the edge rows' parameters; their (displacement, at, to) to carry
     for use in face.uses:
         tie = _tie(face, use, part, edge_morphs, inputs)
         if tie is not None:
@@ -252,25 +252,26 @@ def face_problem(face: Face, part: Part, edge_morphs: list[EdgeMorph], inputs: F
         else:
             on_edge = evaluate_curve(edge.curve, use.t)
             moved = evaluate_curve(edge_morphs[use.edge].curve, use.t) - on_edge
-        moved = carried(moved, on_edge, evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1]), estimator,
-                         GAP_SHARE * part.diagonal)
+        carries.append((moved, on_edge, evaluate_surface(surface, use.uv[:, 0], use.uv[:, 1])))
         uv_rows.append(use.uv)
-        target_rows.append(moved)
     edge_rows = sum(len(r) for r in uv_rows)
 
     nodes = cls.nodes_of(Role.FACE, face.index)
     uv_rows.append(cls.uv[nodes])
-    target_rows.append(field.displacements[nodes])
     uv = np.concatenate(uv_rows)
-    target = np.concatenate(target_rows)
-
     trimmed_away = inputs.trimmed_away
     outside = None if trimmed_away is None else (lambda p: trimmed_away(face.index, p))
     centres = _artificial_parameters(surface, uv, outside)
+    # the edges' displacements carried to the surface at their pcurves and the artificial nodes' estimates,
+    # from one call of the estimator
+    target_rows, at_centres = carried_together(
+        carries, estimator, GAP_SHARE * part.diagonal,
+        evaluate_surface(surface, centres[:, 0], centres[:, 1]) if len(centres) else None)
+    target = np.concatenate(target_rows + [field.displacements[nodes]])
     weight = np.ones(len(uv))
     if len(centres):
         uv = np.concatenate([uv, centres])
-        target = np.concatenate([target, estimator(evaluate_surface(surface, centres[:, 0], centres[:, 1]))])
+        target = np.concatenate([target, at_centres])
         weight = np.concatenate([weight, np.full(len(centres), inputs.settings.artificial_weight)])
 
     free = ~fixed.ravel()
