@@ -207,6 +207,29 @@ def test_right_fields_are_not_taken_for_mix_ups(step, name):
     check_positions(part, inverted, projector, settings, inverted=True)
 
 
+def test_the_moved_nodes_are_looked_at_only_where_nodes_lie_off_the_part(block, monkeypatch):
+    """A right field's nodes lie on the part as given: no node can lie nearer it moved, and the nodes moved are
+    not projected; cold positions given lie off it, and the nodes moved are looked at (and the mix-up found)."""
+    import hot2cold.pipeline.checks as checks
+
+    part, projector, f = block
+    asked = []
+    projected = checks.part_distances
+    monkeypatch.setattr(checks, "part_distances",
+                        lambda part, points, *a, **k: asked.append(len(points)) or projected(part, points, *a, **k))
+    settings = Settings()
+    on = projected(part, f.points, projector, 0.0762) <= checks._ROUNDING * part.diagonal   # (the field's volume
+    f = DisplacementField(f.points[on], f.displacements[on])                                 # nodes left out)
+    m = min(len(f), checks._SAMPLE)
+    check_positions(part, f, projector, settings)
+    assert asked == [m]
+    asked.clear()
+    d = f.displacements * (0.5 / np.abs(f.displacements).max())
+    with pytest.raises(FieldError, match="mixes up hot and cold"):
+        check_positions(part, DisplacementField(f.points + d, -d, source="cold.csv"), projector, settings)
+    assert asked == [m, 2 * m]
+
+
 def test_large_and_tiny_displacements_are_no_mix_up(block):
     """A right field that moves the block far beyond the node distance (a 3 degree turn and a 2 mm shift), one
     that hardly moves it, and a right --invert field of the same turn (cold to hot at the hot nodes)."""

@@ -147,7 +147,9 @@ def check_positions(part: Part, field: DisplacementField, projector: Projector, 
 
     On :data:`_SAMPLE` nodes at the most, before they are classified (which takes long for nodes off the part);
     a point lies on the part rather than another where it is ``_NEARER`` times nearer to it and within
-    ``_ON_SHARE`` of the node distance (:func:`~hot2cold.pipeline.classify.part_distances`).  ``inverted``: the
+    ``_ON_SHARE`` of the node distance (:func:`~hot2cold.pipeline.classify.part_distances`).  The nodes moved
+    are looked at only where enough nodes lie off the part as they are given (a hot-to-cold field's lie on
+    it): no other node can lie nearer it moved.  ``inverted``: the
     field is a cold-to-hot one, inverted (``--invert``), whose displacements are about the given ones negated;
     the message speaks of the field as given.  ``starts``: Newton's starts on the part's faces
     (:class:`~hot2cold.pipeline.classify.Starts`, kept for the classification), None: made here.
@@ -161,9 +163,19 @@ def check_positions(part: Part, field: DisplacementField, projector: Projector, 
     if not np.any(np.linalg.norm(moves, axis=1) > _NEARER * rounding):
         return              # moved or not, the nodes lie where they lie: nothing to tell
     node_distance = settings.lengths(part.diagonal)[0]
-    raw = part_distances(part, np.concatenate([points, points + moves, points - moves]), projector,
-                         node_distance, settings.threads, starts).reshape(3, m)
-    here, there = np.maximum(raw[0], rounding), np.maximum(raw[1:], rounding)
+    given = part_distances(part, points, projector, node_distance, settings.threads, starts, asked=3 * m)
+    here = np.maximum(given, rounding)
+    # a node lies nearer the part moved than where it is only where it lies more than _NEARER times the rounding
+    # off the part as given (no point comes nearer than the rounding): with too few such nodes, the nodes moved
+    # need not be looked at
+    off = int(np.count_nonzero(here > _NEARER * rounding))
+    if off < max(_MIXED_LEAST, _MIXED_SHARE * m):
+        log.debug("of %d nodes sampled, %d lie off the part as given: hot and cold are not mixed up", m, off)
+        return
+    moved = part_distances(part, np.concatenate([points + moves, points - moves]), projector, node_distance,
+                           settings.threads, starts, asked=3 * m)
+    raw = np.concatenate([given[None], moved.reshape(2, m)])
+    there = np.maximum(raw[1:], rounding)
     on = _ON_SHARE * node_distance
     nearer = np.sum(there * _NEARER < np.minimum(here, on), axis=1)
     farther = np.sum(here * _NEARER < np.minimum(there, on), axis=1)

@@ -260,21 +260,23 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     return Classification(role, owner, uv, t, foot, distance, node_distance, edge_distance, node=node)
 
 
-def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: float,
-                   threads: int = 1, starts: Starts | None = None) -> np.ndarray:
+def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: float,  # noqa: PLR0913
+                   threads: int = 1, starts: Starts | None = None, *, asked: int | None = None) -> np.ndarray:
     """The distance ``(n,)`` (mm) of each of ``points (n, 3)`` to the nearest face of ``part`` where it is within
     ``reach``, inf elsewhere: a quick look at where points lie, for the checks of a field before the morph.
 
     The candidate faces and Newton's foot points are :func:`classify_nodes`' (foot points inside the face's
     trimmed domain or on its border); nothing is asked of the kernel, so a point Newton leaves open, or whose
     nearest point is on an edge that its faces' foot points miss, comes back farther (inf) than it is.
+    ``asked``: the number of points the candidate clouds are made for (:meth:`Starts.cloud`; None: ``n``), so
+    that points asked about in several calls are looked at as in one.
     """
     points = np.asarray(points, float).reshape(-1, 3)
     best = np.full(len(points), np.inf)
     if not len(points):
         return best
     starts = starts if starts is not None else Starts(part)
-    cloud, cloud_face, apart = starts.cloud(projector, len(points))
+    cloud, cloud_face, apart = starts.cloud(projector, len(points) if asked is None else asked)
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, reach, 2.0 * apart)
     faces = [(k, pair_node[group]) for k, group in runs(pair_face)]
     on_surface = ON_SURFACE * part.diagonal
