@@ -324,3 +324,22 @@ def test_faces_whose_parameters_the_conversion_keeps_keep_their_pcurves():
     moves = _pcurve_moves(hot, converted)
     assert len(moves) > 40 and max(moves) <= tol
     assert BRepCheck_Analyzer(converted).IsValid()
+
+
+def test_arrays_of_reals_are_read_as_any_build_of_ocp_returns_them():
+    """A knot sequence as an array, as a handle to one (other builds of OCP return that, some without an accessor
+    of their own), or as anything iterable: the same values in order."""
+    from OCP.TColStd import TColStd_Array1OfReal, TColStd_HArray1OfReal
+
+    from hot2cold.kernel.explore import reals
+
+    array, handle = TColStd_Array1OfReal(2, 4), TColStd_HArray1OfReal(1, 3)
+    for i in range(3):
+        array.SetValue(i + 2, 0.5 * i)
+        handle.SetValue(i + 1, 0.5 * i)
+
+    class Handle:                                   # a handle with its array only, as cadquery-ocp's
+        def Array1(self):
+            return array
+
+    assert reals(array) == reals(handle) == reals(Handle()) == reals(iter([0.0, 0.5, 1.0])) == [0.0, 0.5, 1.0]

@@ -26,9 +26,13 @@ def shape_map(shape: TopoDS_Shape, kind) -> list:
 
 
 def reals(array) -> list[float]:
-    """The values of an OCCT array of reals (``TColStd_Array1OfReal``: a knot sequence, knots), in order, read
-    one by one: Python's own iteration over such an array is far slower (a part of hundreds of faces reads
-    thousands)."""
+    """The values of an OCCT array of reals (a knot sequence, knots: ``TColStd_Array1OfReal``, or the handle
+    ``TColStd_HArray1OfReal`` that other builds of OCP return), in order, read one by one: Python's own
+    iteration over such an array is far slower (a part of hundreds of faces reads thousands)."""
+    if hasattr(array, "Array1"):                        # a handle: its array
+        array = array.Array1()
+    if not hasattr(array, "Value"):                     # no accessor to read it by: Python's iteration
+        return [float(x) for x in array]
     return [array.Value(i) for i in range(array.Lower(), array.Upper() + 1)]
 
 
