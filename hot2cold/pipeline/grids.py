@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Callable, NamedTuple
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -205,23 +205,6 @@ class FaceNodes:
         return self._faces[face.index]
 
 
-class _Partial(NamedTuple):
-    """A face's grid as :class:`FaceGridder` makes it before the estimate over every node moves the points
-    ``~own`` (the arrays as :class:`FaceGrid`'s; ``own``: the points the face's own estimate moved;
-    ``on_elements``: what the field's elements say there, or None)."""
-
-    uv: np.ndarray
-    hot: np.ndarray
-    expected: np.ndarray
-    slack: np.ndarray
-    near: np.ndarray
-    node_distance: np.ndarray
-    support: float
-    uncertainty: np.ndarray
-    own: np.ndarray
-    on_elements: tuple | None
-
-
 @dataclass(frozen=True, eq=False)
 class FaceGridder:
     """Makes the :class:`FaceGrid` of a part's faces (calling it: ``gridder(part, faces=None, slack=True)``).
@@ -273,10 +256,10 @@ class FaceGridder:
         spacing = CHECK_SPACING * part.diagonal
         overall = GRID_REACH * face_nodes.classification.spacing()
 
-        def near_own(face) -> _Partial:
-            """The face's grid and what its own nodes (and the field's elements) tell of it; the points its
-            nodes do not tell are left to the estimate over every node, asked for every face's at once below (a
-            call's cost)."""
+        def near_own(face) -> tuple[FaceGrid, np.ndarray, tuple | None]:
+            """The face's grid as its own nodes tell it, the points they moved ``own`` and what the field's
+            elements say there (or None); the other points are left to the estimate over every node, asked for
+            every face's at once below (a call's cost)."""
             uv = face_grid(face, spacing, projector)
             hot = evaluate_surface(face.surface, uv[:, 0], uv[:, 1]) if len(uv) else np.zeros((0, 3))
             expected, slack, near = hot.copy(), np.zeros(len(uv)), np.zeros(len(uv), bool)
@@ -297,21 +280,22 @@ class FaceGridder:
                         slack[near] = uncertainty[near] = np.nan
             support = max(reach, overall) if np.isfinite(reach) else overall
             on_elements = elements(hot) if elements is not None and len(uv) else None
-            return _Partial(uv, hot, expected, slack, near, node_distance, support, uncertainty, own, on_elements)
+            return (FaceGrid(uv, hot, expected, slack, near, node_distance, support, uncertainty), own,
+                    on_elements)
 
-        def grid(found: _Partial, moved: np.ndarray) -> FaceGrid:
-            uv, hot, expected, slack, near, node_distance, support, uncertainty, own, on_elements = found
-            expected[~own] += moved
-            if on_elements is not None:                 # the elements' own field where they tell it
-                on, disp, slack_on = on_elements
-                expected[on], slack[on], near = hot[on] + disp, slack_on, near | on
-                uncertainty[on] = slack_on
-            return FaceGrid(uv, hot, expected, slack, near, node_distance, support, uncertainty)
+        def grid(found: tuple[FaceGrid, np.ndarray, tuple | None], moved: np.ndarray) -> FaceGrid:
+            made, own, on_elements = found
+            made.expected[~own] += moved
+            if on_elements is None:
+                return made
+            on, disp, slack_on = on_elements            # the elements' own field where they tell it
+            made.expected[on], made.slack[on], made.uncertainty[on] = made.hot[on] + disp, slack_on, slack_on
+            return replace(made, near=made.near | on)
 
         chosen = part.faces if faces is None else [part.faces[k] for k in faces]
         mine = [face_nodes.of(part, face) for face in chosen]     # each face's nodes found here: the threads read them
         found = map_threads(near_own, chosen, self.threads, cost=[len(m.nodes) for m in mine])
-        moved = estimated(estimator, *(f.hot[~f.own] for f in found))
+        moved = estimated(estimator, *(made.hot[~own] for made, own, _ in found))
         return [grid(f, m) for f, m in zip(found, moved)]
 
 
