@@ -31,7 +31,7 @@ from .g1 import (ALONG_CURVE, KINK_NOISE_DEG, REFINED, TURN_WEIGHT, CornerReport
                  correct_corners, edge_decided, kink_bound, kink_maxima, kink_misses, surface_corner_normals,
                  turn_rows, with_corners)
 from .g1 import correct_g1 as second_rows
-from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jump
+from .g2 import BEND_WEIGHTS, BENT, TANGENT_WEIGHT, bend_rows, edge_jumps
 from .refine import Refitter, Regrid, refine_patches
 
 __all__ = ["G1Refinement", "anchor_corners", "correct_g1", "correct_g2", "smooth_g1"]
@@ -413,8 +413,9 @@ def correct_g2(context: MorphContext, face_morphs: list[FaceMorph], reports: lis
     hot = [face.surface for face in part.faces]
     surfaces = [f.surface for f in face_morphs]
     by_edge = {te.edge: te for te in context.tangent}
-    jumps = {r.edge: (edge_jump(part, hot, by_edge[r.edge]), edge_jump(part, surfaces, by_edge[r.edge]))
-             for r in reports}
+    examined = [by_edge[r.edge] for r in reports]
+    jumps = {te.edge: (float(h), float(b)) for te, h, b in zip(examined, edge_jumps(part, hot, examined),
+                                                                edge_jumps(part, surfaces, examined))}
     bent_faces: set[int] = set()
     refused: dict[int, str] = {}
     if settings.continuity is Continuity.G2:
@@ -425,11 +426,14 @@ def correct_g2(context: MorphContext, face_morphs: list[FaceMorph], reports: lis
         face_morphs, surfaces, bent_faces, refused = _bend_all(bending, face_morphs, smooth)
         # the G1 reports are measured again where a face bent
         reports = _measured_again(part, surfaces, reports, context.tangent, bent_faces)
+    asked = [by_edge[r.edge] for r in reports
+             if jumps[r.edge][0] <= settings.g2_tolerance and settings.continuity is Continuity.G2]
+    after = dict(zip((te.edge for te in asked), edge_jumps(part, surfaces, asked)))
     out = []
     for r in reports:
         hot_jump, before = jumps[r.edge]
-        g2 = hot_jump <= settings.g2_tolerance and settings.continuity is Continuity.G2
-        now = edge_jump(part, surfaces, by_edge[r.edge]) if g2 else before
+        g2 = r.edge in after
+        now = float(after[r.edge]) if g2 else before
         why = _g2_reason(r, now, bool(bent_faces & set(r.faces)), refused, settings.g2_tolerance) if g2 else ""
         out.append(replace(r, jump_hot=hot_jump, jump_before=before, jump_after=now,
                            g2=hot_jump <= settings.g2_tolerance, g2_reason=why))
@@ -450,7 +454,7 @@ def _bend_all(bending: _Bending, face_morphs: list[FaceMorph], smooth: list[Tang
     bent_faces: set[int] = set()
     refused: dict[int, str] = {}
     for weight in BEND_WEIGHTS:   # stiffer bend rows while the jumps stay and every face may bend
-        bend = [te for te in smooth if edge_jump(part, current, te) > tolerance]
+        bend = [te for te, jump in zip(smooth, edge_jumps(part, current, smooth)) if jump > tolerance]
         if not bend:
             break
         refits, off = bending.bend(current, bend, weight, set(refused))

@@ -94,7 +94,7 @@ class G1Report:
         edge on a side, :data:`ALONG_CURVE` where a face has it inside its domain (a trimming curve).
     jump_hot, jump_before, jump_after : float, the largest jump of the normal curvature across the edge on
         the hot faces, on the morphed ones before the G2 correction (after G1) and after it, each as a share
-        of the curvature where it happens (:func:`hot2cold.pipeline.g2.edge_jump`; NaN where not measured).
+        of the curvature where it happens (:func:`hot2cold.pipeline.g2.edge_jumps`; NaN where not measured).
     g2 : bool, whether the hot faces were curvature-continuous there (``jump_hot`` within the G2 tolerance).
     g2_reason : str, for such an edge, how its curvature was corrected, or why not; empty when it was not
         asked for (``Settings.continuity`` G1) or not needed.
@@ -578,6 +578,23 @@ def edge_points(part: Part, edge: TangentEdge, k: int, m: int) -> tuple[np.ndarr
     return _uv_at(use, t), _uv_at(use_o, t)
 
 
+def hot_edge_points(part: Part, edge: TangentEdge, k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`edge_points` ``(uv, uv_other)`` and :func:`hot_defined` there ``(m,)``, kept on the tangent ``edge``
+    per face, point count and the two hot faces (the objects: a refined part's are others), read-only: the
+    rows that steer a face's fit (:func:`turn_rows`, :func:`~hot2cold.pipeline.g2.bend_rows`) ask for the
+    same points of the hot faces in every round of G1 and G2 and every trial."""
+    other = edge.faces[1 - edge.faces.index(k)]
+    key = (k, m, part.faces[k], part.faces[other])
+    known = edge.__dict__.setdefault("_hot_points", {})     # (a frozen dataclass: its __dict__ takes a cache)
+    if key not in known:
+        uv, uv_o = edge_points(part, edge, k, m)
+        found = (uv, uv_o, hot_defined(part, (k, other), uv, uv_o))
+        for a in found:
+            a.flags.writeable = False
+        known[key] = found
+    return known[key]
+
+
 def kink_misses(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge], limit_deg: float,
                 n_points_factor: int = 2) -> dict[int, np.ndarray]:
     """Where the morphed ``surfaces`` kink a tangent edge of ``edges`` more than ``limit_deg`` beyond the hot
@@ -648,11 +665,10 @@ def turn_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float,
         if k not in te.faces or (te.sides[te.faces.index(k)] is not None and not sides):
             continue
         other = te.faces[1 - te.faces.index(k)]
-        uv, uv_o = edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 2))
+        uv, uv_o, measurable = hot_edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 2))
         n = surface_normals(cold, uv[:, 0], uv[:, 1])
         n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
-        keep = (np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1)
-                & hot_defined(part, (k, other), uv, uv_o))
+        keep = np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1) & measurable
         n_t = n_o if other in kept else n + np.where(np.sum(n * n_o, axis=1) < 0, -1.0, 1.0)[:, None] * n_o
         n_t = n_t[keep] / np.linalg.norm(n_t[keep], axis=1, keepdims=True)
         bases = surface_derivative_bases(hot, uv[keep, 0], uv[keep, 1])

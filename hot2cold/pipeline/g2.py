@@ -31,7 +31,8 @@ from scipy import sparse
 from ..core.bspline import (BSplineSurface, cross, evaluate_surface, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
-from .g1 import Neighbours, TangentEdge, _matched_uv, _use_of, edge_points, hot_defined, mean_spans
+from .g1 import (Neighbours, TangentEdge, _matched_uv, _normals_by_face, _use_of, hot_defined, hot_edge_points,
+                 mean_spans)
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +91,14 @@ def cross_curvature(surface: BSplineSurface, uv: np.ndarray, tangent: np.ndarray
     """
     uv = np.asarray(uv, dtype=float).reshape(-1, 2)
     _, s_u, s_v, s_uu, s_uv, s_vv = surface_jet(surface, uv[:, 0], uv[:, 1])
-    n = surface_normals(surface, uv[:, 0], uv[:, 1])
+    return _curvature_across((s_u, s_v, s_uu, s_uv, s_vv), surface_normals(surface, uv[:, 0], uv[:, 1]), tangent)
+
+
+def _curvature_across(jet: tuple[np.ndarray, ...], n: np.ndarray, tangent: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`cross_curvature` from the surface's derivatives ``jet = (S_u, S_v, S_uu, S_uv, S_vv)`` and unit
+    normals ``n`` at the points, each (m, 3)."""
+    s_u, s_v, s_uu, s_uv, s_vv = jet
     c = cross(n, tangent)
     with np.errstate(divide="ignore", invalid="ignore"):
         c /= np.linalg.norm(c, axis=1, keepdims=True)
@@ -117,25 +125,48 @@ def curvature_jump(surface_a: BSplineSurface, uv_a: np.ndarray, surface_b: BSpli
     uv_b = np.asarray(uv_b, dtype=float).reshape(-1, 2)
     if uv_a.shape != uv_b.shape or len(uv_a) < 2:
         raise ValueError(f"uv_a {uv_a.shape} and uv_b {uv_b.shape} must both be (m, 2), m >= 2")
-    tangent = _edge_tangents(surface_a, uv_a)
-    kappa_a, n_a, _ = cross_curvature(surface_a, uv_a, tangent)
-    kappa_b, n_b, _ = cross_curvature(surface_b, uv_b, tangent)
+    return _jump(_points_jets_normals(surface_a, uv_a[:, 0], uv_a[:, 1]),
+                 _points_jets_normals(surface_b, uv_b[:, 0], uv_b[:, 1]))
+
+
+def _points_jets_normals(surface: BSplineSurface, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``S``, ``S_u``, ``S_v``, ``S_uu``, ``S_uv``, ``S_vv`` and the unit normal of ``surface`` at ``u``, ``v``
+    (m,), side by side: ``(m, 21)``."""
+    return np.column_stack([evaluate_surface(surface, u, v), *surface_jet(surface, u, v)[1:],
+                            surface_normals(surface, u, v)])
+
+
+def _jump(a: np.ndarray, b: np.ndarray) -> CurvatureJump:
+    """:func:`curvature_jump` from :func:`_points_jets_normals` of both surfaces at the matching points, each
+    ``(m, 21)``: the edge's direction by differences of face a's points."""
+    tangent = np.gradient(a[:, :3], axis=0)
+    kappa_a, n_a, _ = _curvature_across(tuple(a[:, 3 * i:3 * i + 3] for i in range(1, 6)), a[:, 18:], tangent)
+    kappa_b, n_b, _ = _curvature_across(tuple(b[:, 3 * i:3 * i + 3] for i in range(1, 6)), b[:, 18:], tangent)
     sign = np.where(np.einsum("ij,ij->i", n_a, n_b) < 0, -1.0, 1.0)
     return CurvatureJump(kappa_a, sign * kappa_b, n_a)
 
 
-def edge_jump(part: Part, surfaces: list[BSplineSurface], edge: TangentEdge) -> float:
-    """The largest jump of the normal curvature across a tangent ``edge`` on ``surfaces`` (one per face of
-    ``part``), at the edge's samples, as a share of the curvature there (:meth:`CurvatureJump.relative`, the
-    floor one over the part's diagonal); NaN where not measurable."""
-    fa, fb = edge.faces
-    uv_a, uv_b = _matched_uv(_use_of(part.faces[fa], edge.edge), _use_of(part.faces[fb], edge.edge))
-    if len(uv_a) < 2:
-        return float("nan")
-    jump = curvature_jump(surfaces[fa], uv_a, surfaces[fb], uv_b)
-    keep = hot_defined(part, edge.faces, uv_a, uv_b)        # not where a collapsed side's normal is noise
-    return CurvatureJump(np.where(keep, jump.kappa_a, np.nan), np.where(keep, jump.kappa_b, np.nan),
-                         jump.normal).relative(1.0 / part.diagonal)
+def edge_jumps(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEdge]) -> np.ndarray:
+    """The largest jump of the normal curvature across each tangent edge of ``edges`` ``(len(edges),)`` on
+    ``surfaces`` (one per face of ``part``), at the edge's samples, as a share of the curvature there
+    (:meth:`CurvatureJump.relative`, the floor one over the part's diagonal); NaN where not measurable (where
+    the hot normals are not, :attr:`~hot2cold.pipeline.g1.TangentEdge.measurable`).  All at once: each face
+    evaluated once for the samples of every edge asked of it (a call's cost is mostly its own, not its
+    points')."""
+    uvs = [_matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
+           for te in edges]
+    asked = [(te.faces[side], uv[side]) for side in (0, 1) for te, uv in zip(edges, uvs)]
+    found = _normals_by_face(surfaces, asked, _points_jets_normals)
+    out = np.full(len(edges), np.nan)
+    for r, (te, (uv_a, uv_b)) in enumerate(zip(edges, uvs)):
+        if len(uv_a) < 2:
+            continue
+        jump = _jump(found[r], found[len(edges) + r])
+        # not where a collapsed side's normal is noise
+        keep = te.measurable if te.measurable is not None else hot_defined(part, te.faces, uv_a, uv_b)
+        out[r] = CurvatureJump(np.where(keep, jump.kappa_a, np.nan), np.where(keep, jump.kappa_b, np.nan),
+                               jump.normal).relative(1.0 / part.diagonal)
+    return out
 
 
 def bend_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float
@@ -160,13 +191,12 @@ def bend_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float
         if k not in te.faces:
             continue
         other = te.faces[1 - te.faces.index(k)]
-        uv, uv_o = edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 3))
+        uv, uv_o, measurable = hot_edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 3))
         tangent = _edge_tangents(cold, uv)
         kappa, n, ab = cross_curvature(cold, uv, tangent)
         kappa_o, n_o, _ = cross_curvature(surfaces[other], uv_o, tangent)
         kappa_o = np.where(np.einsum("ij,ij->i", n, n_o) < 0, -kappa_o, kappa_o)
-        keep = (np.isfinite(kappa) & np.isfinite(kappa_o) & np.isfinite(ab).all(axis=1)
-                & hot_defined(part, (k, other), uv, uv_o))
+        keep = np.isfinite(kappa) & np.isfinite(kappa_o) & np.isfinite(ab).all(axis=1) & measurable
         if not keep.any():
             continue
         wanted_kappa = kappa_o if other in kept else 0.5 * (kappa + kappa_o)
