@@ -684,3 +684,51 @@ def test_kink_maxima_are_each_edges_own_largest_kink(blade_part):
     assert np.allclose(kink_maxima(blade_part, cold, unmasked), one_by_one, rtol=0, atol=1e-12)
     assert np.allclose([kink_added(blade_part, cold, te) for te in edges],
                        one_by_one - [te.hot_angle_max for te in edges], rtol=0, atol=1e-12)
+
+
+def _bent(surface: BSplineSurface, amount: float) -> BSplineSurface:
+    """``surface`` with its poles bent about the x axis by ``amount`` (1/mm): other curvatures across its edges."""
+    poles = surface.poles.copy()
+    poles[..., 2] += amount * poles[..., 1] ** 2
+    return surface.with_poles(poles)
+
+
+def test_curvature_jumps_of_many_edges_are_those_of_each_edge(blade_part):
+    """:func:`edge_jumps` evaluates each face once for all its edges; it gives each edge's jump as measured on
+    its own (:func:`curvature_jump` at the edge's samples, where the hot normals are measurable)."""
+    from hot2cold.pipeline.g1 import _matched_uv, _use_of
+    from hot2cold.pipeline.g2 import curvature_jump, edge_jumps
+
+    part = blade_part
+    found = tangent_edges(part)
+    surfaces = [_bent(f.surface, 0.002 * (k + 1)) for k, f in enumerate(part.faces)]
+    together = edge_jumps(part, surfaces, found)
+    for te, jump in zip(found, together):
+        uv_a, uv_b = _matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
+        alone = curvature_jump(surfaces[te.faces[0]], uv_a, surfaces[te.faces[1]], uv_b)
+        keep = te.measurable
+        expected = replace(alone, kappa_a=np.where(keep, alone.kappa_a, np.nan),
+                           kappa_b=np.where(keep, alone.kappa_b, np.nan)).relative(1.0 / part.diagonal)
+        assert jump > 1e-3                                 # the bends made jumps to measure
+        assert jump == pytest.approx(expected, rel=1e-12)
+    assert np.array_equal(edge_jumps(part, surfaces, found[::-1]), together[::-1])
+
+
+def test_hot_edge_points_are_kept_per_face_count_and_hot_faces(blade_part):
+    """The hot side of the rows that steer a fit is found once per tangent edge, face, point count and hot faces
+    (a refined part's faces are other objects, and are asked again), read-only."""
+    from hot2cold.pipeline.g1 import edge_points, hot_defined, hot_edge_points
+
+    part = blade_part
+    te = tangent_edges(part)[0]
+    k, other = te.faces
+    uv, uv_o, measurable = hot_edge_points(part, te, k, 12)
+    expected = edge_points(part, te, k, 12)
+    assert np.array_equal(uv, expected[0]) and np.array_equal(uv_o, expected[1])
+    assert np.array_equal(measurable, hot_defined(part, (k, other), *expected))
+    assert hot_edge_points(part, te, k, 12)[0] is uv                    # kept
+    assert hot_edge_points(part, te, k, 13)[0].shape == (13, 2)         # another count: found anew
+    assert not uv.flags.writeable
+    faces = list(part.faces)
+    faces[k] = replace(faces[k])                                        # a refined part's face: another object
+    assert hot_edge_points(replace(part, faces=faces), te, k, 12)[0] is not uv
