@@ -732,3 +732,24 @@ def test_hot_edge_points_are_kept_per_face_count_and_hot_faces(blade_part):
     faces = list(part.faces)
     faces[k] = replace(faces[k])                                        # a refined part's face: another object
     assert hot_edge_points(replace(part, faces=faces), te, k, 12)[0] is not uv
+
+
+def test_corner_edges_are_kept_per_part(blade_part):
+    """The hot part's corners (two edges of a face meeting at a vertex, not tangent to each other) are found once
+    per part, face and vertex; another part (a refined one) finds its own."""
+    from hot2cold.pipeline.g1 import _corner_edges, _edges_at
+
+    part = blade_part
+    corners = {(f.index, v): _corner_edges(part, f.index, v) for f in part.faces
+               for v in {v for u in f.uses for v in part.edges[u.edge].vertices}}
+    found = [c for c in corners.values() if c is not None]
+    assert len(found) >= 4                                               # the caps' corners at least
+    for (k, v), c in corners.items():
+        assert _corner_edges(part, k, v) is c                            # kept
+        if c is not None:
+            assert {c[0].index, c[1].index} == {e.index for e in _edges_at(part, k, v)}
+            assert c[2] == tuple(e.vertices[0] == v for e in c[:2])
+    other = replace(part)
+    k, v = next(key for key, c in corners.items() if c is not None)
+    again = _corner_edges(other, k, v)
+    assert again is not corners[(k, v)] and again[:2] == corners[(k, v)][:2]

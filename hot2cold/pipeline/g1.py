@@ -742,20 +742,35 @@ def _edges_at(part: Part, face: int, vertex: int) -> list:
             if face in e.faces and not e.degenerate and e.vertices[0] != e.vertices[1]]
 
 
+def _corner_edges(part: Part, face: int, vertex: int) -> tuple | None:
+    """The two edges of ``face`` at ``vertex`` where they meet at a corner of the hot part (not tangent to each
+    other: at :data:`_MIN_CORNER_DEG` or more), and whether each starts there; None where the face has not
+    exactly two edges there or they meet tangentially.  Kept on the part per face and vertex (a hot part's,
+    asked at every corner correction and every G1 round and trial)."""
+    known = part.__dict__.setdefault("_corner_edges", {})   # (a frozen dataclass: its __dict__ takes a cache)
+    key = (face, vertex)
+    if key not in known:
+        at = _edges_at(part, face, vertex)
+        found = None
+        if len(at) == 2:
+            starts = tuple(e.vertices[0] == vertex for e in at)
+            if _line_angle(*(_end_tangent(e.curve, start) for e, start in zip(at, starts))) >= _MIN_CORNER_DEG:
+                found = (at[0], at[1], starts)
+        known[key] = found
+    return known[key]
+
+
 def _corner_normals(part: Part, faces: list[int], vertex: int, curves: list[BSplineCurve | None]) -> dict:
     """Per face of ``faces`` with exactly two edges at ``vertex`` meeting at a corner (not tangent to each
-    other on the hot part): the unit normal ``(3,)`` from the cross product of their tangents there on
-    ``curves`` (orientation arbitrary)."""
+    other on the hot part, :func:`_corner_edges`): the unit normal ``(3,)`` from the cross product of their
+    tangents there on ``curves`` (orientation arbitrary)."""
     out = {}
     for k in faces:
-        at = _edges_at(part, k, vertex)
-        if len(at) != 2:
+        found = _corner_edges(part, k, vertex)
+        if found is None:
             continue
-        hot = [_end_tangent(e.curve, e.vertices[0] == vertex) for e in at]
-        if _line_angle(*hot) < _MIN_CORNER_DEG:
-            continue
-        t = [_end_tangent(curves[e.index], e.vertices[0] == vertex) for e in at]
-        n = _unit(cross(t[0], t[1]))
+        a, b, (start_a, start_b) = found
+        n = _unit(cross(_end_tangent(curves[a.index], start_a), _end_tangent(curves[b.index], start_b)))
         if np.isfinite(n).all():
             out[k] = n
     return out
