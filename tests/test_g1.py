@@ -753,3 +753,20 @@ def test_corner_edges_are_kept_per_part(blade_part):
     k, v = next(key for key, c in corners.items() if c is not None)
     again = _corner_edges(other, k, v)
     assert again is not corners[(k, v)] and again[:2] == corners[(k, v)][:2]
+
+
+def test_tangent_edges_found_all_at_once_are_those_found_edge_by_edge(blade_part):
+    """:func:`tangent_edges` evaluates each hot face once for all its edges: each edge's largest angle and
+    measurable points are those of its own :func:`kink_angles` and :func:`hot_defined`."""
+    from hot2cold.pipeline.g1 import _matched_uv, _use_of, hot_defined
+
+    part = blade_part
+    found = tangent_edges(part)
+    assert found
+    for te in found:
+        fa, fb = (part.faces[k] for k in te.faces)
+        uv_a, uv_b = _matched_uv(_use_of(fa, te.edge), _use_of(fb, te.edge))
+        assert te.hot_angle_max == np.nanmax(kink_angles(fa.surface, uv_a, fb.surface, uv_b))
+        assert np.array_equal(te.measurable, hot_defined(part, te.faces, uv_a, uv_b))
+    loose = tangent_edges(part, angle_tol_deg=90.0)                      # the caps' edges too
+    assert len(loose) > len(found) and {te.edge for te in found} <= {te.edge for te in loose}

@@ -268,21 +268,28 @@ def tangent_edges(part: Part, angle_tol_deg: float = 1.0) -> list[TangentEdge]:
 
     The normals of both faces are evaluated at the edge's samples on each face (the EdgeUse ``uv``); an edge
     is tangent when the angle between the normal lines stays below ``angle_tol_deg`` at every sample where
-    both normals are defined (and at least one is).  Returns the edges in index order.
+    both normals are defined (and at least one is).  Returns the edges in index order.  Each face is
+    evaluated once for all its edges (:func:`_normals_by_face`, :func:`hot_measurable`).
     """
-    out = []
+    shared = []
     for edge in part.edges:
         faces = tuple(dict.fromkeys(edge.faces))
         if edge.degenerate or len(faces) != 2:
             continue
-        fa, fb = (part.faces[k] for k in faces)
-        use_a, use_b = _use_of(fa, edge.index), _use_of(fb, edge.index)
-        uv_a, uv_b = _matched_uv(use_a, use_b)
-        angle = _max(kink_angles(fa.surface, uv_a, fb.surface, uv_b))
+        uses = _use_of(part.faces[faces[0]], edge.index), _use_of(part.faces[faces[1]], edge.index)
+        shared.append((edge, faces, uses, _matched_uv(*uses)))
+    hot = [face.surface for face in part.faces]
+    normals = _normals_by_face(hot, [(faces[side], uv[side]) for side in (0, 1) for _, faces, _, uv in shared])
+    tangent = []
+    for r, (edge, faces, uses, uv) in enumerate(shared):
+        angle = _max(_line_angles(normals[r], normals[len(shared) + r]))
         if np.isfinite(angle) and angle < angle_tol_deg:
-            out.append(TangentEdge(edge.index, (faces[0], faces[1]),
-                                   (side_along(fa.surface, use_a), side_along(fb.surface, use_b)), angle,
-                                   hot_defined(part, faces, uv_a, uv_b)))
+            tangent.append((edge, faces, uses, uv, angle))
+    measurable = hot_measurable(part, [(faces[0], uv[0]) for _, faces, _, uv, _ in tangent],
+                                [(faces[1], uv[1]) for _, faces, _, uv, _ in tangent])
+    out = [TangentEdge(edge.index, (faces[0], faces[1]),
+                       (side_along(hot[faces[0]], uses[0]), side_along(hot[faces[1]], uses[1])), angle, defined)
+           for (edge, faces, uses, _, angle), defined in zip(tangent, measurable)]
     log.info("%d of %d edges are tangent (normals within %.3g deg)", len(out), len(part.edges), angle_tol_deg)
     return out
 
