@@ -94,6 +94,12 @@ def test_synthetic_kink_removed(weights):
     (rep,) = reports
     assert rep.corrected and rep.reason == ""
     assert rep.kink_before_max == pytest.approx(before)
+    # the kinks before given by a caller that knows them (rounds on the same surfaces): the same correction
+    again, (rep_again,) = correct_g1(part, [sa, kinked], [ALL_SIDES, ALL_SIDES], edges,
+                                     before=kink_maxima(part, [sa, kinked], edges))
+    assert (rep_again.kink_before_max, rep_again.kink_after_max, rep_again.method) == \
+        (rep.kink_before_max, rep.kink_after_max, rep.method)
+    assert all(np.array_equal(a.poles, b.poles) for a, b in zip(again, surfaces))
     assert rep.kink_after_max <= 0.01
     assert _kink(surfaces, part) <= 0.01
     # the common row (and everything but the interior of the second rows) is bit for bit unchanged

@@ -173,8 +173,9 @@ def _second_rows(context: MorphContext, surfaces: list[BSplineSurface], tied: li
     again, in up to :data:`_G1_ROUNDS` rounds.  Returns the surfaces and one report per kinked edge."""
     part = context.part
     frozen: dict[int, str] = {}
+    before = kink_maxima(part, surfaces, kinked)            # the same surfaces in every round
     for _ in range(_G1_ROUNDS):
-        corrected, reports = second_rows(part, surfaces, tied, kinked, frozen=frozen)
+        corrected, reports = second_rows(part, surfaces, tied, kinked, frozen=frozen, before=before)
         off = context.distances.all_moved_off({k: (surfaces[k], corrected[k]) for k in range(len(surfaces))
                                                if corrected[k] is not surfaces[k]}, grids)
         # second rows that leave an edge more kinked than they found it, and beyond the promise, are no

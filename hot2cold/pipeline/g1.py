@@ -397,9 +397,9 @@ class _Task:
     keep: np.ndarray      # (m,) bool, rows where both normals are defined
 
 
-def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],
+def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list[tuple[Side, ...]],  # noqa: PLR0913
                edges: list[TangentEdge] | None = None,
-               n_points_factor: int = 2, frozen: dict[int, str] | None = None
+               n_points_factor: int = 2, frozen: dict[int, str] | None = None, *, before: np.ndarray | None = None
                ) -> tuple[list[BSplineSurface], list[G1Report]]:
     """Remove the kinks the morph left along the hot part's tangent edges.
 
@@ -413,6 +413,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     n_points_factor : equidistant edge points per pole of a second row (the paper takes about two).
     frozen : faces that must not turn (face index -> why), e.g. because turning would take them off their
         nodes by more than the tolerance; the other face of such an edge turns into their tangent plane.
+    before : ``(len(edges),)`` the edges' largest kinks on ``face_surfaces`` (:func:`kink_maxima`) where the
+        caller knows them (it corrects the same surfaces again with other faces frozen); None: measured here.
 
     Returns
     -------
@@ -431,7 +433,8 @@ def correct_g1(part: Part, face_surfaces: list[BSplineSurface], tied_sides: list
     n_points_factor = max(int(n_points_factor), 1)
     surfaces = list(face_surfaces)
 
-    before = kink_maxima(part, surfaces, edges)          # as the edges come, before any face turns
+    if before is None:
+        before = kink_maxima(part, surfaces, edges)      # as the edges come, before any face turns
     reasons: list[str] = []
     planned: list[_Plan] = []
     for r, te in enumerate(edges):
