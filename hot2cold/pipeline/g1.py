@@ -139,9 +139,9 @@ def _line_angles(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(sin, cos))
 
 
-def _normals_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.ndarray]],
-                     evaluate: Callable[[BSplineSurface, np.ndarray, np.ndarray], np.ndarray] = surface_normals
-                     ) -> list[np.ndarray]:
+def _evaluate_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.ndarray]],
+                      evaluate: Callable[[BSplineSurface, np.ndarray, np.ndarray], np.ndarray] = surface_normals
+                      ) -> list[np.ndarray]:
     """``evaluate`` (default :func:`~hot2cold.core.bspline.surface_normals`, rows ``(m, ...)``) of
     ``surfaces[k_i]`` at ``uv_i (m_i, 2)`` for each ``(k_i, uv_i)`` of ``asked``: one evaluation per face for all
     that is asked of it (a call's cost is mostly its own, not its points')."""
@@ -166,7 +166,7 @@ def hot_measurable(part: Part, asked_a: list[tuple[int, np.ndarray]], asked_b: l
         return np.column_stack(normals_and_rounding(surface, u, v))                  # (m, 4)
 
     hot = [face.surface for face in part.faces]
-    found = _normals_by_face(hot, list(asked_a) + list(asked_b), normals_rounding)
+    found = _evaluate_by_face(hot, list(asked_a) + list(asked_b), normals_rounding)
     bound = np.radians(MEASURABLE_DEG)
     n = len(asked_a)
     return [np.isfinite(_line_angles(a[:, :3], b[:, :3])) & (a[:, 3] <= bound) & (b[:, 3] <= bound)
@@ -236,7 +236,7 @@ def kink_maxima(part: Part, surfaces: list[BSplineSurface], edges: list[TangentE
     edges' samples in one evaluation."""
     uvs = [_matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
            for te in edges]
-    normals = _normals_by_face(surfaces, [(te.faces[side], uv[side]) for side in (0, 1)
+    normals = _evaluate_by_face(surfaces, [(te.faces[side], uv[side]) for side in (0, 1)
                                           for te, uv in zip(edges, uvs)])
     out = np.empty(len(edges))
     for r, (te, (uv_a, uv_b)) in enumerate(zip(edges, uvs)):
@@ -269,7 +269,7 @@ def tangent_edges(part: Part, angle_tol_deg: float = 1.0) -> list[TangentEdge]:
     The normals of both faces are evaluated at the edge's samples on each face (the EdgeUse ``uv``); an edge
     is tangent when the angle between the normal lines stays below ``angle_tol_deg`` at every sample where
     both normals are defined (and at least one is).  Returns the edges in index order.  Each face is
-    evaluated once for all its edges (:func:`_normals_by_face`, :func:`hot_measurable`).
+    evaluated once for all its edges (:func:`_evaluate_by_face`, :func:`hot_measurable`).
     """
     shared = []
     for edge in part.edges:
@@ -279,7 +279,7 @@ def tangent_edges(part: Part, angle_tol_deg: float = 1.0) -> list[TangentEdge]:
         uses = _use_of(part.faces[faces[0]], edge.index), _use_of(part.faces[faces[1]], edge.index)
         shared.append((edge, faces, uses, _matched_uv(*uses)))
     hot = [face.surface for face in part.faces]
-    normals = _normals_by_face(hot, [(faces[side], uv[side]) for side in (0, 1) for _, faces, _, uv in shared])
+    normals = _evaluate_by_face(hot, [(faces[side], uv[side]) for side in (0, 1) for _, faces, _, uv in shared])
     tangent = []
     for r, (edge, faces, uses, uv) in enumerate(shared):
         angle = _max(_line_angles(normals[r], normals[len(shared) + r]))
@@ -520,7 +520,7 @@ def _tasks(part: Part, surfaces: list[BSplineSurface], planned: list[_Plan]) -> 
     points at once, face by face, on ``surfaces`` (their side rows shared: the surfaces the second rows are
     solved on), and only where the hot ones are defined."""
     asked = [(plan.faces[side].index, plan.uvs[side]) for side in (0, 1) for plan in planned]
-    normals = _normals_by_face(surfaces, asked)
+    normals = _evaluate_by_face(surfaces, asked)
     measurable = hot_measurable(part, asked[:len(planned)], asked[len(planned):])
     tasks: list[_Task] = []
     for i, plan in enumerate(planned):

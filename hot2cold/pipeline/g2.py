@@ -31,7 +31,7 @@ from scipy import sparse
 from ..core.bspline import (BSplineSurface, cross, evaluate_surface, surface_derivatives, surface_jet,
                             surface_normals, surface_second_derivative_bases)
 from ..core.model import Part
-from .g1 import (Neighbours, TangentEdge, _matched_uv, _normals_by_face, _use_of, hot_defined, hot_edge_points,
+from .g1 import (Neighbours, TangentEdge, _evaluate_by_face, _matched_uv, _use_of, hot_defined, hot_edge_points,
                  mean_spans)
 
 log = logging.getLogger(__name__)
@@ -156,7 +156,7 @@ def edge_jumps(part: Part, surfaces: list[BSplineSurface], edges: list[TangentEd
     uvs = [_matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
            for te in edges]
     asked = [(te.faces[side], uv[side]) for side in (0, 1) for te, uv in zip(edges, uvs)]
-    found = _normals_by_face(surfaces, asked, _points_jets_normals)
+    found = _evaluate_by_face(surfaces, asked, _points_jets_normals)
     out = np.full(len(edges), np.nan)
     for r, (te, (uv_a, uv_b)) in enumerate(zip(edges, uvs)):
         if len(uv_a) < 2:
