@@ -213,6 +213,64 @@ def test_linear_pinv_from_the_span_is_numpy_s(shape):
     assert np.abs(got - expected).max() <= 1e-10 * np.abs(expected).max()
 
 
+@pytest.mark.parametrize("shape", ["spread", "graded", "plane", "line", "one point", "round"])
+def test_thin_svd_of_many_3_column_matrices_is_lapack_s(shape):
+    """The SVD of many m x 3 matrices from Jacobi rotations of their Gram matrices is LAPACK's: the same
+    singular values (the small ones to the rounding of the largest), the same right singular subspaces
+    (a thin direction's vector up to its sign), orthonormal vectors, and the matrices back from the factors."""
+    from hot2cold.core.localfit import thin_svd3
+
+    c, m = 200, 9
+    a = RNG.normal(size=(c, m, 3))
+    if shape == "graded":                       # nearly flat: a thin direction far below rounding of the others
+        a = a * [1.0, 0.3, 1e-9]
+    elif shape == "plane":
+        a[..., 2] = 0.0
+    elif shape == "line":
+        a = a[..., :1] * [1.0, -2.0, 0.5]
+    elif shape == "one point":
+        a[:] = 0.0
+    elif shape == "round":                      # two equal singular values: any basis of their plane
+        q = np.linalg.qr(RNG.normal(size=(m, 2)))[0]
+        a = np.stack([q[:, 0], q[:, 1], 1e-3 * RNG.normal(size=m)], axis=1)[None].repeat(c, axis=0)
+    a = a @ np.linalg.qr(RNG.normal(size=(3, 3)))[0]          # not along the axes
+    u, sigma, vt = thin_svd3(a)
+    u0, sigma0, vt0 = np.linalg.svd(a, full_matrices=False)
+    top = np.abs(a).max() * 10
+    eps = np.finfo(float).eps
+    assert np.abs(sigma - sigma0).max() <= 50 * eps * top
+    assert np.all(np.diff(sigma, axis=1) <= 50 * eps * top)                         # descending
+    assert np.abs(vt @ vt.transpose(0, 2, 1) - np.eye(3)).max() <= 50 * eps
+    assert np.abs(np.einsum("cmj,cj,cjk->cmk", u, sigma, vt) - a).max() <= 50 * eps * top
+    used = sigma > 1e-6 * np.maximum(sigma[:, :1], 1e-300)
+    both = used[:, :, None] & used[:, None, :]
+    assert np.abs(np.einsum("cmj,cmk->cjk", u, u) - np.eye(3))[both].max(initial=0.0) <= 1e-8
+    # the span of the leading right vectors is LAPACK's wherever a gap separates them from the rest
+    for j in range(1, 3):
+        gap = sigma0[:, j - 1] > 1e-3 * sigma0[:, 0] + sigma0[:, j] * 1.001
+        p = np.einsum("cji,cjk->cik", vt[:, :j], vt[:, :j])
+        p0 = np.einsum("cji,cjk->cik", vt0[:, :j], vt0[:, :j])
+        assert np.abs(p - p0)[gap].max(initial=0.0) <= 1e-9
+
+
+def test_jacobi_eigen_decomposition_of_3_by_3_matrices():
+    """The eigen-decomposition of many symmetric semi-definite 3 x 3 matrices by Jacobi rotations: ``g v = v
+    diag(lam)`` to the rounding of ``g``, ``v`` orthonormal, the eigenvalues numpy's; a diagonal matrix (nothing
+    to rotate) and a zero one come back as they are, with ``v`` the identity."""
+    from hot2cold.core.localfit import sym_eig3
+
+    b = RNG.normal(size=(300, 3, 3))
+    g = np.concatenate([b @ b.transpose(0, 2, 1), np.diag([3.0, 1.0, 2.0])[None], np.zeros((1, 3, 3))])
+    lam, v = sym_eig3(g)
+    eps = np.finfo(float).eps
+    scale = np.abs(g).max(axis=(1, 2), keepdims=True)
+    assert (np.abs(g @ v - v * lam[:, None, :]) <= 20 * eps * scale).all()
+    assert np.abs(v.transpose(0, 2, 1) @ v - np.eye(3)).max() <= 20 * eps
+    assert (np.abs(np.sort(lam, axis=1) - np.linalg.eigvalsh(g)) <= 20 * eps * scale[:, :, 0]).all()
+    assert np.array_equal(lam[-2], [3.0, 1.0, 2.0]) and np.array_equal(v[-2], np.eye(3))
+    assert np.array_equal(lam[-1], np.zeros(3)) and np.array_equal(v[-1], np.eye(3))
+
+
 def test_local_fits_over_whole_neighbourhoods_skip_only_the_mask(monkeypatch):
     """Neighbourhoods whose rows are all valid are fitted without multiplying by the mask (a pass over the arrays
     spared): the same numbers as the masked path gives them, and a row left out still counts for nothing."""

@@ -16,7 +16,9 @@ The monomials, numbered from 0, are ``1, x, y, z`` (degree 1) and then ``x x, y 
 (degree 2).  Offsets are scaled by each neighbourhood's largest offset component, so the columns are of order
 one.  The least squares are pseudo-inverses (batched SVD), never normal equations; the quadratic part of
 :func:`fits_at`, whose cut keeps only singular values within 1e3 of the largest, takes its SVD from the
-eigen-decomposition of its 6 x 6 Gram matrices (:func:`_right_singular`).
+eigen-decomposition of its 6 x 6 Gram matrices (:func:`_right_singular`), and the neighbourhoods' spans
+(:class:`Span`) theirs from Jacobi rotations of 3 x 3 Gram matrices, all neighbourhoods at once
+(:func:`thin_svd3`; numpy's batched SVD calls LAPACK once per matrix).
 """
 from __future__ import annotations
 
@@ -148,7 +150,7 @@ class Span(NamedTuple):
         offsets[size <= _SAME_POINT * np.abs(centre).max(axis=1)] = 0.0
         scale = offset_scale(offsets)
         offsets = offsets / scale[:, None, None]
-        u, sigma, vt = np.linalg.svd(offsets, full_matrices=False)
+        u, sigma, vt = thin_svd3(offsets)
         return cls(centre, count, scale, offsets, u, sigma, vt)
 
     def off(self, x: np.ndarray, share: float) -> np.ndarray:
@@ -231,11 +233,78 @@ def fits_at(points: np.ndarray, values: np.ndarray, valid: np.ndarray, x: np.nda
     inverse = np.where(keep, 1.0 / np.where(keep, sigma, 1.0), 0.0)             # (c, 6)
     gain = np.einsum("cs,csj->cj", at_square, v) * inverse                      # (c, 6)
     # the residual on the left singular vectors square v_j / sigma_j, without forming them
-    projected = np.einsum("csj,csk->cjk", v, np.matmul(square.transpose(0, 2, 1), residual)) * inverse[..., None]
+    projected = np.matmul(v.transpose(0, 2, 1), np.matmul(square.transpose(0, 2, 1), residual)) * inverse[..., None]
     before = (residual ** 2).sum(axis=(1, 2))
     left = np.sqrt(np.maximum(before - (projected ** 2).sum(axis=(1, 2)), 0.0) / np.maximum(before, 1e-300))
     trust = np.clip(np.log(UNTRUSTED / np.maximum(left, 1e-300)) / np.log(UNTRUSTED / TRUSTED), 0.0, 1.0)
     return LocalFit(out, np.einsum("cj,cjk->ck", gain, projected), trust, off)
+
+
+def thin_svd3(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The thin SVD of many ``m x 3`` matrices ``a (c, m, 3)``: ``u (c, m, 3)``, ``sigma (c, 3)`` (descending) and
+    ``vt (c, 3, 3)``, as ``np.linalg.svd(a, full_matrices=False)`` gives them up to the signs of the singular
+    vectors (and their choice within a repeated singular value); singular values within rounding of each other
+    may come in either order.
+
+    The right singular vectors are the eigenvectors of the 3 x 3 Gram matrices ``a^T a`` (:func:`sym_eig3`,
+    vectorised over ``c``); the singular values are the norms of the columns of ``a v`` and ``u`` those columns
+    normalised (zero for a zero singular value), not the square roots of the eigenvalues, so a small singular
+    value is as accurate as the vector: to the rounding of the largest, as LAPACK's.  numpy's batched SVD calls
+    LAPACK once per matrix, which for matrices this small is mostly the call itself."""
+    lam, v = sym_eig3(np.matmul(a.transpose(0, 2, 1), a))
+    v = np.take_along_axis(v, np.argsort(-lam, axis=1, kind="stable")[:, None, :], axis=2)
+    b = np.matmul(a, v)                                                         # (c, m, 3): u sigma
+    sigma = np.sqrt(np.einsum("cmj,cmj->cj", b, b))
+    u = b / np.where(sigma > 0.0, sigma, 1.0)[:, None, :]
+    return u, sigma, v.transpose(0, 2, 1)
+
+
+#: Sweeps of :func:`sym_eig3` at most; three to four reach the rounding of symmetric 3 x 3 matrices.
+_JACOBI_SWEEPS = 12
+
+
+def sym_eig3(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalues ``(c, 3)`` (in no order) and eigenvectors ``(c, 3, 3)`` (column ``j`` for value ``j``) of
+    many symmetric positive semi-definite 3 x 3 matrices ``g (c, 3, 3)``, by cyclic Jacobi rotations, each
+    rotation applied to all matrices at once.
+
+    A pair ``(p, q)`` is rotated in a matrix while ``|g_pq| > eps sqrt(g_pp g_qq)`` (the relative criterion of
+    Demmel and Veselic: small eigenvalues of graded matrices come out to their own relative accuracy), the
+    sweeps stop when no matrix has such a pair."""
+    g = np.asarray(g, float)
+    a = {(i, j): g[:, i, j].copy() for i in range(3) for j in range(i, 3)}
+    v = {(i, j): np.full(len(g), float(i == j)) for i in range(3) for j in range(3)}
+    eps = np.finfo(float).eps
+    for _ in range(_JACOBI_SWEEPS):
+        rotated = False
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            turn = np.abs(apq) > eps * np.sqrt(np.abs(a[p, p] * a[q, q]))
+            if not turn.any():
+                continue
+            rotated = True
+            # tan of the angle that zeroes g_pq, the smaller root of t^2 + 2 t (g_qq - g_pp) / (2 g_pq) = 1, in
+            # a form without the quotient (hypot and where cost as much as the rest of the rotation)
+            d = a[q, q] - a[p, p]
+            t = np.divide(2.0 * apq * np.copysign(1.0, d), np.abs(d) + np.sqrt(d * d + 4.0 * apq * apq),
+                          out=np.zeros_like(apq), where=turn)
+            cos = 1.0 / np.sqrt(t * t + 1.0)
+            sin = t * cos
+            a[p, p] = a[p, p] - t * apq
+            a[q, q] = a[q, q] + t * apq
+            a[p, q] = apq * ~turn
+            r = 3 - p - q                                                       # the third row and column
+            rp, rq = (min(r, p), max(r, p)), (min(r, q), max(r, q))
+            arp, arq = a[rp], a[rq]
+            a[rp], a[rq] = cos * arp - sin * arq, sin * arp + cos * arq
+            for i in range(3):
+                vp, vq = v[i, p], v[i, q]
+                v[i, p], v[i, q] = cos * vp - sin * vq, sin * vp + cos * vq
+        if not rotated:
+            break
+    values = np.stack([a[0, 0], a[1, 1], a[2, 2]], axis=1)
+    vectors = np.stack([np.stack([v[i, j] for j in range(3)], axis=1) for i in range(3)], axis=1)
+    return values, vectors
 
 
 def _right_singular(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -297,7 +366,7 @@ def _left_out(points: np.ndarray, values: np.ndarray, at: np.ndarray, neighbours
     idx = idx[:, 1:]                                                            # the point itself left out
     offsets = points[idx] - points[at][:, None, :]                              # (c, k, 3)
     centred = offsets - offsets.mean(axis=1, keepdims=True)
-    _, _, vt = np.linalg.svd(centred, full_matrices=False)                      # (c, 3, 3)
+    _, _, vt = thin_svd3(centred)                                               # (c, 3, 3)
     stn = np.einsum("ckj,caj->cka", offsets, vt)                                # (c, k, 3), the point at 0
     stn = stn / np.maximum(np.abs(stn[..., :2]).max(axis=(1, 2)), 1e-300)[:, None, None]
     s, t, n = stn[..., 0], stn[..., 1], stn[..., 2]
