@@ -115,6 +115,46 @@ def test_nodes_started_at_one_point_share_its_jet(monkeypatch):
     assert np.abs(shared.distance - alone.distance).max() <= 1e-12 * part.diagonal
 
 
+@pytest.mark.parametrize("name", ["twisted_blade", "thin_blade", "rotor37_blade"])
+def test_foot_points_of_nodes_on_the_surface_are_theirs_to_rounding(name):
+    """Nodes on a face's surface, started from the nearest point of its start grid: Newton settles each on the
+    parameters it was made at, to the rounding of the box (1e-12 of it: Rotor 37's faces round to 3e-13 even
+    when Newton settles on a step of 1e-9), at a distance of rounding.  Newton settles on a step of up to
+    ``SETTLE_RTOL`` (1e-6) of the box and takes that step's own error (its square) out from the second-order
+    expansion; for a node on the surface the distance is that error's tangential length, which the step alone
+    left at up to 3e-10 mm on the thin blade."""
+    part = load_part(SAMPLES / f"{name}.step", Settings())
+    rng = np.random.default_rng(5)
+    for face in part.faces:
+        points, uv = _near_surface_nodes(face, 2000, 0.0, rng)
+        grid, grid_uv = start_grid(face, START_SPACING * part.diagonal)
+        start = grid_uv[cKDTree(grid).query(points)[1]]
+        fp = project_to_surface(face.surface, points, start)
+        size = np.array(face.surface.domain[1::2]) - np.array(face.surface.domain[::2])
+        s = fp.settled
+        assert s.mean() > 0.9
+        assert np.abs(fp.uv[s] - uv[s]).max() / size.max() <= 1e-12, face.index
+        assert fp.distance[s].max() <= 1e-12 * part.diagonal, face.index
+
+
+def test_curve_foot_points_of_points_on_the_curve_are_theirs_to_rounding():
+    """Points on an edge's curve, started from the nearest of 200 samples: Newton settles each on the parameter
+    it was made at, to the rounding of the domain (the last step's own error taken out, as for surfaces)."""
+    part = load_part(SAMPLES / "rotor37_blade.step", Settings())
+    rng = np.random.default_rng(6)
+    for edge in part.edges:
+        curve = edge.curve
+        lo, hi = curve.domain
+        t = rng.uniform(lo + 0.02 * (hi - lo), hi - 0.02 * (hi - lo), 500)
+        points = evaluate_curve(curve, t)
+        samples = np.linspace(lo, hi, 200)
+        start = samples[cKDTree(evaluate_curve(curve, samples)).query(points)[1]]
+        feet = project_to_curve(curve, points, start)
+        assert feet.settled.mean() > 0.9
+        assert np.abs(feet.t - t)[feet.settled].max() <= 1e-12 * (hi - lo), edge.index
+        assert feet.distance[feet.settled].max() <= 1e-12 * part.diagonal, edge.index
+
+
 def _near_edge_points(curve, n: int, offset: float, rng) -> tuple[np.ndarray, np.ndarray]:
     """``n`` points ``(n, 3)`` up to ``offset`` mm off ``curve`` (inside its range, away from its ends), and the
     parameters ``(n,)`` of the nearest of 200 samples of the curve, Newton's starts."""

@@ -9,8 +9,8 @@ dense sample of the face) by Newton's method on ``g = 0``, all nodes of a face a
 
 Where ``H`` is not positive definite (far from the surface, or across a ridge) the Gauss-Newton matrix
 ``J^T J`` takes its place, which always points downhill.  A node *settles* when its step falls below
-``STEP_RTOL`` of the parameter box, it lies inside the box (or past its border by no more than that: a node
-on a face's edge, whose last step points out of the box or into it by the rounding of its zero), and its
+``SETTLE_RTOL`` of the parameter box, it lies inside the box (or past its border by no more than ``STEP_RTOL``:
+a node on a face's edge, whose last step points out of the box or into it by the rounding of its zero), and its
 distance is no larger than its start's.
 Nodes that do not settle (the minimum lies on the box's border, Newton wanders, or it did not converge in
 ``MAX_ITERATIONS``) are for the caller to hand to the kernel's ``GeomAPI_ProjectPointOnSurf``, which stays
@@ -24,8 +24,9 @@ sample parts the two agree to rounding (``tests/test_footpoint.py``, ``benchmark
 start (a few per cent of the box off, across a thin leading edge) Newton can settle in the wrong basin, on a
 foot point several times farther than the nearest: the start has to be near.
 
-The kernel needs one call per node and face; this needs about three vectorised evaluations of the surface's
-second-order jet for all nodes of a face, a small fraction of a kernel call's cost per node.
+The kernel needs one call per node and face; this needs two to three vectorised evaluations of the surface's
+second-order jet for all nodes of a face (the start's shared among the nodes started there), a small fraction
+of a kernel call's cost per node.
 """
 from __future__ import annotations
 
@@ -36,10 +37,18 @@ import numpy as np
 from .bspline import (BSplineCurve, BSplineSurface, cross, curve_derivative_basis, curve_jet, evaluate_curve,
                       evaluate_surface, surface_first_jet, surface_jet)
 
-#: A full Newton step smaller than this fraction of the parameter box settles a node: the step is taken, and
-#: as Newton's method converges quadratically the error left is of the order of the step squared (1e-18 of
-#: the box).  The foot point's distance then comes from the last evaluation and its first derivatives
-#: (``|r + S_u du + S_v dv|``, off by the step squared too), so a settled node costs no extra evaluation.
+#: A full Newton step smaller than this fraction of the parameter box settles a node (:func:`project_to_surface`,
+#: :func:`project_to_curve`).  The step is taken with a correction of its own error, which is of the order of
+#: its square: the gradient at the step's end, from the last evaluation's second-order expansion, and the
+#: Newton step that zeroes it.  What is left is of the order of the step cubed (1e-18 of the box) and, for a
+#: node off the surface, of the third derivatives times its distance (the distance, stationary at the foot
+#: point, changes by the square of that).  The distance comes from the same expansion, so a settled node costs
+#: no extra evaluation.  Settling on a step of 1e-9 without the correction, as before, gave the same foot
+#: points one evaluation later for most nodes.
+SETTLE_RTOL = 1e-6
+#: A node within this fraction of the parameter box of the box's border is on it (its last step pointing out of
+#: the box or into it by the rounding of its zero); the steepest-descent distances
+#: (:func:`curve_distances`, :func:`surface_distances_above`) settle on a step below it.
 STEP_RTOL = 1e-9
 #: Newton iterations at the most.
 MAX_ITERATIONS = 25
@@ -147,11 +156,12 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         # pushed back into the box by more than a settling step (a node on the border settles either way)
         clamped = np.any(np.abs(new - target) > STEP_RTOL * scale, axis=1)
         stuck = np.all(np.abs(new - uv[active]) <= STEP_RTOL * scale, axis=1)   # at the border, pushing out
-        tiny = np.all(np.abs(step) <= STEP_RTOL * scale, axis=1)
+        tiny = np.all(np.abs(step) <= SETTLE_RTOL * scale, axis=1)
         uv[active] = new
         done = tiny & newton & ~clamped & ~bad
-        distance[active[done]] = np.linalg.norm(r[done] + su[done] * step[done, :1] + sv[done] * step[done, 1:],
-                                                axis=1)
+        fix, distance[active[done]] = _last_step_error(
+            tuple(x[done] for x in (r, su, sv, suu, suv, svv)), step[done], (h00[done], h01[done], h11[done]))
+        uv[active[done]] = np.clip(uv[active[done]] + fix, lo, hi)
         settled[active[done]] = True
         active = active[~(tiny | stuck | bad)]
     rest = np.flatnonzero(~settled)
@@ -159,6 +169,29 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
     settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
     return uv, distance, settled
+
+
+def _last_step_error(jet: tuple, step: np.ndarray, hessian: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The correction ``(m, 2)`` of a settling Newton step's own error and the distance ``(m,)`` at the step's end
+    with it, from the jet ``(r, S_u, S_v, S_uu, S_uv, S_vv)`` (each ``(m, 3)``, ``r = S - P``) where the step
+    ``(m, 2)`` was taken and the Hessian ``(h00, h01, h11)`` (each ``(m,)``) that gave it (see
+    :data:`SETTLE_RTOL`).
+
+    The second-order expansion at the step's end ``d`` gives the gradient ``g(x + d) = S_x . (S_xx d d) / 2 +
+    (S_xx d) . (S_x d)`` per component (the Newton step zeroed the rest); the correction is the Newton step on it.
+    What it leaves is of the order of the step cubed and of the third derivatives times the distance (zero for a
+    node on the surface, whose distance is then its foot point's tangential error)."""
+    r, su, sv, suu, suv, svv = jet
+    h00, h01, h11 = hessian
+    du, dv = step[:, :1], step[:, 1:]
+    along = su * du + sv * dv                                                       # S_x d
+    bend = 0.5 * (suu * du * du + 2.0 * suv * du * dv + svv * dv * dv)               # S_xx d d / 2
+    gu = np.einsum("ij,ij->i", su, bend) + np.einsum("ij,ij->i", suu * du + suv * dv, along)
+    gv = np.einsum("ij,ij->i", sv, bend) + np.einsum("ij,ij->i", suv * du + svv * dv, along)
+    det = h00 * h11 - h01 * h01
+    fix_u, fix_v = -(h11 * gu - h01 * gv) / det, -(h00 * gv - h01 * gu) / det
+    distance = np.linalg.norm(r + along + bend + su * fix_u[:, None] + sv * fix_v[:, None], axis=1)
+    return np.column_stack([fix_u, fix_v]), distance
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,7 +215,7 @@ def project_to_curve(curve: BSplineCurve, points: np.ndarray, start: np.ndarray)
     """Foot points of ``points (n, 3)`` on ``curve`` within its domain by Newton's method on
     ``g = C' . (C - P) = 0`` from the parameters ``start (n,)``, all points at once: the one-parameter case of
     :func:`project_to_surface`, with its rules (``H = C'.C' + C''.(C - P)``, Gauss-Newton's ``C'.C'`` where
-    ``H`` is not safely positive; a point settles on a Newton step below :data:`STEP_RTOL` of the domain that
+    ``H`` is not safely positive; a point settles on a Newton step below :data:`SETTLE_RTOL` of the domain that
     stays inside it, no farther than its start).  A point whose minimum lies at an end of the domain does not
     settle."""
     points = np.asarray(points, dtype=float)
@@ -192,7 +225,7 @@ def project_to_curve(curve: BSplineCurve, points: np.ndarray, start: np.ndarray)
     if start.shape != (len(points),):
         raise ValueError(f"start must be (n,) = ({len(points)},), got shape {start.shape}")
     lo, hi = curve.domain
-    settle = STEP_RTOL * (hi - lo)
+    settle, border = SETTLE_RTOL * (hi - lo), STEP_RTOL * (hi - lo)
     t = np.clip(start, lo, hi)
     settled = np.zeros(len(points), bool)
     distance = np.full(len(points), np.nan)
@@ -215,12 +248,17 @@ def project_to_curve(curve: BSplineCurve, points: np.ndarray, start: np.ndarray)
         step[bad] = 0.0
         target = t[active] + step
         new = np.clip(target, lo, hi)
-        clamped = np.abs(new - target) > settle
-        stuck = np.abs(new - t[active]) <= settle
+        clamped = np.abs(new - target) > border
+        stuck = np.abs(new - t[active]) <= border
         tiny = np.abs(step) <= settle
         t[active] = new
         done = tiny & newton & ~clamped & ~bad
-        distance[active[done]] = np.linalg.norm(r[done] + d1[done] * step[done, None], axis=1)
+        # the last step's own error, as for a surface (:func:`_newton`): g(t + d) = 3/2 (C' . C'') d^2
+        dt = step[done, None]
+        along, bend = d1[done] * dt, 0.5 * d2[done] * dt * dt
+        fix = -1.5 * np.einsum("ij,ij->i", d1[done], d2[done]) * step[done] ** 2 / h[done]
+        t[active[done]] = np.clip(t[active[done]] + fix, lo, hi)
+        distance[active[done]] = np.linalg.norm(r[done] + along + bend + d1[done] * fix[:, None], axis=1)
         settled[active[done]] = True
         active = active[~(tiny | stuck | bad)]
     rest = np.flatnonzero(~settled)
