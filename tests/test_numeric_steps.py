@@ -483,6 +483,33 @@ def test_closing_pairs_misses_no_pair_of_the_whole_set():
             assert closing_pairs(hot, cold, 1.0) > 0
 
 
+def test_closing_pairs_counts_every_qualifying_pair_of_the_points_kept():
+    """The count skips the square roots of the pairs that cannot qualify (``d_hot^2 <= 4 d_cold^2 + margin^2``)
+    and drops none that does: it is the count over every pair of the points kept, on clouds squeezed so that
+    many pairs close."""
+    from scipy.spatial import cKDTree
+
+    from hot2cold.pipeline.checks import _SAME_SHARE, closing_pairs
+
+    def every_pair(hot, cold, spacing):
+        eps = _SAME_SHARE * spacing
+        keys = np.floor(np.column_stack([hot, cold]) / (eps / np.sqrt(3.0))).astype(np.int64)
+        keep = np.unique(keys, axis=0, return_index=True)[1]
+        hot, cold = hot[keep], cold[keep]
+        pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray")
+        d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
+        d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
+        return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
+
+    counts = []
+    for _ in range(20):
+        hot = RNG.uniform(0, 10, (2000, 3))
+        cold = hot * [1.0, 1.0, RNG.uniform(0.05, 1.0)]              # squeezed along z: gaps close
+        counts.append(every_pair(hot, cold, 1.0))
+        assert closing_pairs(hot, cold, 1.0) == counts[-1]
+    assert max(counts) > 100
+
+
 def test_the_left_out_estimate_tells_how_well_the_nodes_know_the_field():
     """Left out in turn, nodes on a smooth field are predicted by the others to within the estimate's
     truncation; across a thermal front narrower than the nodes' spacing they are not, by more than the

@@ -819,6 +819,10 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
     pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray")
     if not len(pairs):
         return 0
+    margin = spacing - 6.0 * eps
+    if margin > 0.0:                # d_hot > 2 d_cold + margin needs d_hot^2 > 4 d_cold^2 + margin^2: no root for most
+        dh, dc = hot[pairs[:, 0]] - hot[pairs[:, 1]], cold[pairs[:, 0]] - cold[pairs[:, 1]]
+        pairs = pairs[np.einsum("ij,ij->i", dh, dh) > 4.0 * np.einsum("ij,ij->i", dc, dc) + margin * margin]
     d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
     d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
     return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
