@@ -283,8 +283,8 @@ def sym_eig3(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             if not turn.any():
                 continue
             rotated = True
-            # tan of the angle that zeroes g_pq, the smaller root of t^2 + 2 t (g_qq - g_pp) / (2 g_pq) = 1, in
-            # a form without the quotient (hypot and where cost as much as the rest of the rotation)
+            # tan of the angle that zeroes g_pq, the smaller root of t^2 + 2 t (g_qq - g_pp) / (2 g_pq) = 1,
+            # written without that quotient and without np.hypot (slow); 0 where the pair is not turned
             d = a[q, q] - a[p, p]
             t = np.divide(2.0 * apq * np.copysign(1.0, d), np.abs(d) + np.sqrt(d * d + 4.0 * apq * apq),
                           out=np.zeros_like(apq), where=turn)

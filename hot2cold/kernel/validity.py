@@ -63,8 +63,8 @@ def free_edges(shape) -> int:
 #: share), far more than any strain changes a volume, so the volume checks would judge the rule's error.
 GPROP_EPS = 1e-6
 #: Relative accuracy asked of the same integration for the faces' areas (:func:`face_areas`): they weigh
-#: shares of the part (the area measured, the nodes a face should hold), for which a per mille is plenty; to
-#: :data:`GPROP_EPS` the areas of a refined part of 178 spline faces took six times as long.
+#: shares of the part (the area measured, the nodes a face should hold), for which a per mille is plenty, and
+#: on refined spline faces the integration to :data:`GPROP_EPS` takes several times as long.
 AREA_EPS = 1e-3
 
 
