@@ -137,6 +137,31 @@ def test_foot_points_of_nodes_on_the_surface_are_theirs_to_rounding(name):
         assert fp.distance[s].max() <= 1e-12 * part.diagonal, face.index
 
 
+def test_nodes_whose_last_correction_is_not_trusted_step_on(monkeypatch):
+    """A settling step whose correction is not well below it (``_FIX_SHARE``: a Hessian near singular) is not
+    taken as the last: the node steps on.  With the share made tiny, most nodes take that path, one step later,
+    and settle on the same foot points, to rounding, as with the share as it is."""
+    import hot2cold.core.footpoint as footpoint
+
+    part = load_part(SAMPLES / "twisted_blade.step", Settings())
+    face = part.faces[0]
+    points, _ = _near_surface_nodes(face, 2000, 0.02, np.random.default_rng(8))
+    grid, grid_uv = start_grid(face, START_SPACING * part.diagonal)
+    start = grid_uv[cKDTree(grid).query(points)[1]]
+    calls = []
+    jet = footpoint.surface_jet
+    monkeypatch.setattr(footpoint, "surface_jet", lambda s, u, v: calls.append(len(u)) or jet(s, u, v))
+    usual = project_to_surface(face.surface, points, start)
+    jets = sum(calls)
+    monkeypatch.setattr(footpoint, "_FIX_SHARE", 1e-12)
+    later = project_to_surface(face.surface, points, start)
+    assert sum(calls) - jets > 1.5 * jets / 3                 # most nodes took one more step
+    assert np.array_equal(usual.settled, later.settled) and usual.settled.mean() > 0.95
+    size = max(np.ptp(grid_uv, axis=0))
+    assert np.abs(usual.uv - later.uv)[usual.settled].max() <= 1e-12 * size
+    assert np.abs(usual.distance - later.distance)[usual.settled].max() <= 1e-12 * part.diagonal
+
+
 def test_curve_foot_points_of_points_on_the_curve_are_theirs_to_rounding():
     """Points on an edge's curve, started from the nearest of 200 samples: Newton settles each on the parameter
     it was made at, to the rounding of the domain (the last step's own error taken out, as for surfaces)."""

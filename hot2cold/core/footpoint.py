@@ -46,6 +46,10 @@ from .bspline import (BSplineCurve, BSplineSurface, cross, curve_derivative_basi
 #: no extra evaluation.  Settling on a step of 1e-9 without the correction, as before, gave the same foot
 #: points one evaluation later for most nodes.
 SETTLE_RTOL = 1e-6
+#: A settling step's correction (see :data:`SETTLE_RTOL`) is taken where it is at most this share of the step
+#: (of the order of the step squared, it is far below it); a larger one says the expansion does not hold there (a
+#: Hessian near singular), and the node steps on instead.
+_FIX_SHARE = 0.5
 #: A node within this fraction of the parameter box of the box's border is on it (its last step pointing out of
 #: the box or into it by the rounding of its zero); the steepest-descent distances
 #: (:func:`curve_distances`, :func:`surface_distances_above`) settle on a step below it.
@@ -158,12 +162,16 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         stuck = np.all(np.abs(new - uv[active]) <= STEP_RTOL * scale, axis=1)   # at the border, pushing out
         tiny = np.all(np.abs(step) <= SETTLE_RTOL * scale, axis=1)
         uv[active] = new
-        done = tiny & newton & ~clamped & ~bad
-        fix, distance[active[done]] = _last_step_error(
-            tuple(x[done] for x in (r, su, sv, suu, suv, svv)), step[done], (h00[done], h01[done], h11[done]))
-        uv[active[done]] = np.clip(uv[active[done]] + fix, lo, hi)
-        settled[active[done]] = True
-        active = active[~(tiny | stuck | bad)]
+        rows = np.flatnonzero(tiny & newton & ~clamped & ~bad)
+        fix, feet, ok = _last_step_error(tuple(x[rows] for x in (r, su, sv, suu, suv, svv)), step[rows],
+                                         (h00[rows], h01[rows], h11[rows]), scale)
+        again, rows = rows[~ok], rows[ok]                        # those with no trusted correction step on
+        uv[active[rows]] = np.clip(uv[active[rows]] + fix[ok], lo, hi)
+        distance[active[rows]] = feet[ok]
+        settled[active[rows]] = True
+        going = ~(tiny | stuck | bad)
+        going[again] = True
+        active = active[going]
     rest = np.flatnonzero(~settled)
     if len(rest):
         distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
@@ -171,16 +179,19 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
     return uv, distance, settled
 
 
-def _last_step_error(jet: tuple, step: np.ndarray, hessian: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """The correction ``(m, 2)`` of a settling Newton step's own error and the distance ``(m,)`` at the step's end
-    with it, from the jet ``(r, S_u, S_v, S_uu, S_uv, S_vv)`` (each ``(m, 3)``, ``r = S - P``) where the step
-    ``(m, 2)`` was taken and the Hessian ``(h00, h01, h11)`` (each ``(m,)``) that gave it (see
-    :data:`SETTLE_RTOL`).
+def _last_step_error(jet: tuple, step: np.ndarray, hessian: tuple, scale: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The correction ``(m, 2)`` of a settling Newton step's own error, the distance ``(m,)`` at the step's end
+    with it, and whether it is trusted ``(m,)``, from the jet ``(r, S_u, S_v, S_uu, S_uv, S_vv)`` (each ``(m,
+    3)``, ``r = S - P``) where the step ``(m, 2)`` was taken, the Hessian ``(h00, h01, h11)`` (each ``(m,)``) that
+    gave it and the box's size ``scale (2,)`` (see :data:`SETTLE_RTOL`).
 
     The second-order expansion at the step's end ``d`` gives the gradient ``g(x + d) = S_x . (S_xx d d) / 2 +
     (S_xx d) . (S_x d)`` per component (the Newton step zeroed the rest); the correction is the Newton step on it.
     What it leaves is of the order of the step cubed and of the third derivatives times the distance (zero for a
-    node on the surface, whose distance is then its foot point's tangential error)."""
+    node on the surface, whose distance is then its foot point's tangential error).  A correction larger than
+    :data:`_FIX_SHARE` of its step (a Hessian near singular, at a degenerate point of the surface) is no
+    second-order term: not trusted."""
     r, su, sv, suu, suv, svv = jet
     h00, h01, h11 = hessian
     du, dv = step[:, :1], step[:, 1:]
@@ -191,7 +202,9 @@ def _last_step_error(jet: tuple, step: np.ndarray, hessian: tuple) -> tuple[np.n
     det = h00 * h11 - h01 * h01
     fix_u, fix_v = -(h11 * gu - h01 * gv) / det, -(h00 * gv - h01 * gu) / det
     distance = np.linalg.norm(r + along + bend + su * fix_u[:, None] + sv * fix_v[:, None], axis=1)
-    return np.column_stack([fix_u, fix_v]), distance
+    fix = np.column_stack([fix_u, fix_v])
+    trusted = np.max(np.abs(fix) / scale, axis=1) <= _FIX_SHARE * np.max(np.abs(step) / scale, axis=1)
+    return fix, distance, trusted
 
 
 @dataclass(frozen=True, eq=False)
@@ -252,15 +265,20 @@ def project_to_curve(curve: BSplineCurve, points: np.ndarray, start: np.ndarray)
         stuck = np.abs(new - t[active]) <= border
         tiny = np.abs(step) <= settle
         t[active] = new
-        done = tiny & newton & ~clamped & ~bad
-        # the last step's own error, as for a surface (:func:`_newton`): g(t + d) = 3/2 (C' . C'') d^2
-        dt = step[done, None]
-        along, bend = d1[done] * dt, 0.5 * d2[done] * dt * dt
-        fix = -1.5 * np.einsum("ij,ij->i", d1[done], d2[done]) * step[done] ** 2 / h[done]
-        t[active[done]] = np.clip(t[active[done]] + fix, lo, hi)
-        distance[active[done]] = np.linalg.norm(r[done] + along + bend + d1[done] * fix[:, None], axis=1)
-        settled[active[done]] = True
-        active = active[~(tiny | stuck | bad)]
+        rows = np.flatnonzero(tiny & newton & ~clamped & ~bad)
+        # the last step's own error, as for a surface (:func:`_newton`): g(t + d) = 3/2 (C' . C'') d^2; a
+        # correction not well below its step steps on
+        fix = -1.5 * np.einsum("ij,ij->i", d1[rows], d2[rows]) * step[rows] ** 2 / h[rows]
+        ok = np.abs(fix) <= _FIX_SHARE * np.abs(step[rows])
+        again, rows, fix = rows[~ok], rows[ok], fix[ok]
+        dt = step[rows, None]
+        t[active[rows]] = np.clip(t[active[rows]] + fix, lo, hi)
+        distance[active[rows]] = np.linalg.norm(r[rows] + d1[rows] * dt + 0.5 * d2[rows] * dt * dt
+                                                + d1[rows] * fix[:, None], axis=1)
+        settled[active[rows]] = True
+        going = ~(tiny | stuck | bad)
+        going[again] = True
+        active = active[going]
     rest = np.flatnonzero(~settled)
     if len(rest):
         distance[rest] = np.linalg.norm(evaluate_curve(curve, t[rest]) - points[rest], axis=1)
