@@ -51,8 +51,8 @@ SETTLE_RTOL = 1e-6
 #: Hessian near singular), and the node steps on instead.
 _FIX_SHARE = 0.5
 #: A node within this fraction of the parameter box of the box's border is on it (its last step pointing out of
-#: the box or into it by the rounding of its zero); the steepest-descent distances
-#: (:func:`curve_distances`, :func:`surface_distances_above`) settle on a step below it.
+#: the box or into it by the rounding of its zero); the Gauss-Newton distances (:func:`curve_distances`,
+#: :func:`surface_distances`) settle on a step below it.
 STEP_RTOL = 1e-9
 #: Newton iterations at the most.
 MAX_ITERATIONS = 25
