@@ -118,11 +118,11 @@ def test_nodes_started_at_one_point_share_its_jet(monkeypatch):
 @pytest.mark.parametrize("name", ["twisted_blade", "thin_blade", "rotor37_blade"])
 def test_foot_points_of_nodes_on_the_surface_are_theirs_to_rounding(name):
     """Nodes on a face's surface, started from the nearest point of its start grid: Newton settles each on the
-    parameters it was made at, to the rounding of the box (1e-12 of it: Rotor 37's faces round to 3e-13 even
-    when Newton settles on a step of 1e-9), at a distance of rounding.  Newton settles on a step of up to
-    ``SETTLE_RTOL`` (1e-6) of the box and takes that step's own error (its square) out from the second-order
+    parameters it was made at, to the rounding of the box (1e-12 of it: Rotor 37's parametrisation rounds
+    coarser than its box's digits, with any settling step), at a distance of rounding.  Newton settles on a step
+    of up to ``SETTLE_RTOL`` of the box and takes that step's own error (its square) out from the second-order
     expansion; for a node on the surface the distance is that error's tangential length, which the step alone
-    left at up to 3e-10 mm on the thin blade."""
+    left far above rounding (the speed page's tenth round)."""
     part = load_part(SAMPLES / f"{name}.step", Settings())
     rng = np.random.default_rng(5)
     for face in part.faces:
