@@ -237,7 +237,7 @@ def kink_maxima(part: Part, surfaces: list[BSplineSurface], edges: list[TangentE
     uvs = [_matched_uv(_use_of(part.faces[te.faces[0]], te.edge), _use_of(part.faces[te.faces[1]], te.edge))
            for te in edges]
     normals = _evaluate_by_face(surfaces, [(te.faces[side], uv[side]) for side in (0, 1)
-                                          for te, uv in zip(edges, uvs)])
+                                           for te, uv in zip(edges, uvs)])
     out = np.empty(len(edges))
     for r, (te, (uv_a, uv_b)) in enumerate(zip(edges, uvs)):
         angles = _line_angles(normals[r], normals[len(edges) + r])
