@@ -487,27 +487,66 @@ def test_closing_pairs_counts_every_qualifying_pair_of_the_points_kept():
     """The count skips the square roots of the pairs that cannot qualify (``d_hot^2 <= 4 d_cold^2 + margin^2``)
     and drops none that does: it is the count over every pair of the points kept, on clouds squeezed so that
     many pairs close."""
-    from scipy.spatial import cKDTree
-
-    from hot2cold.pipeline.checks import _SAME_SHARE, closing_pairs
-
-    def every_pair(hot, cold, spacing):
-        eps = _SAME_SHARE * spacing
-        keys = np.floor(np.column_stack([hot, cold]) / (eps / np.sqrt(3.0))).astype(np.int64)
-        keep = np.unique(keys, axis=0, return_index=True)[1]
-        hot, cold = hot[keep], cold[keep]
-        pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray")
-        d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
-        d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
-        return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
+    from hot2cold.pipeline.checks import closing_pairs
 
     counts = []
     for _ in range(20):
         hot = RNG.uniform(0, 10, (2000, 3))
         cold = hot * [1.0, 1.0, RNG.uniform(0.05, 1.0)]              # squeezed along z: gaps close
-        counts.append(every_pair(hot, cold, 1.0))
+        counts.append(_every_kept_pair(hot, cold, 1.0)[0])
         assert closing_pairs(hot, cold, 1.0) == counts[-1]
     assert max(counts) > 100
+
+
+def _every_kept_pair(hot, cold, spacing):
+    """The closing pairs' count over every pair of the points :func:`~hot2cold.pipeline.checks.closing_pairs`
+    keeps, those points (hot, cold) and the pairs ``(c, 2)`` that qualify."""
+    from scipy.spatial import cKDTree
+
+    from hot2cold.pipeline.checks import _SAME_SHARE
+
+    eps = _SAME_SHARE * spacing
+    keys = np.floor(np.column_stack([hot, cold]) / (eps / np.sqrt(3.0))).astype(np.int64)
+    keep = np.unique(keys, axis=0, return_index=True)[1]
+    hot, cold = hot[keep], cold[keep]
+    pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray").reshape(-1, 2)
+    d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
+    d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
+    closing = pairs[d_hot > 2.0 * d_cold + spacing - 6.0 * eps]
+    return len(closing), hot, cold, closing
+
+
+def test_closing_pairs_lists_only_the_pairs_of_cells_whose_moves_differ():
+    """A block rotated by a few degrees and strained (a smooth field) with a pocket squeezed shut in one
+    corner: the cell filter keeps every point of each qualifying pair and few others (the smooth field's
+    cells none), and the count is the one over every pair of the points kept."""
+    from hot2cold.pipeline.checks import _SAME_SHARE, _may_close, closing_pairs
+
+    angle = np.radians(3.0)
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]])
+    for trial in range(6):
+        hot = RNG.uniform(0, 30, (6000, 3))
+        cold = hot @ (turn * (1.0 + 1e-3 * trial)).T
+        assert closing_pairs(hot, cold, 1.0) == 0 == _every_kept_pair(hot, cold, 1.0)[0]
+        pocket = np.all(hot < 6.0, axis=1)
+        cold[pocket, 2] *= RNG.uniform(0.05, 0.3)                       # the pocket squeezed along z
+        count, kept_hot, kept_cold, closing = _every_kept_pair(hot, cold, 1.0)
+        eps = _SAME_SHARE
+        may = _may_close(kept_cold, kept_cold - kept_hot, 2.0 + 2.0 * eps, 1.0 - 6.0 * eps)
+        assert count > 0 and may[closing].all()
+        assert may.sum() < 0.2 * len(may)
+        assert closing_pairs(hot, cold, 1.0) == count
+        smooth = kept_hot @ turn.T
+        assert not _may_close(smooth, smooth - kept_hot, 2.0 + 2.0 * eps, 1.0 - 6.0 * eps).any()
+        # pairs that only just qualify: 1 % beyond the margin (0.25) apart hot, 0.001 apart cold
+        near = RNG.uniform(10, 30, (20, 3))
+        apart = RNG.normal(size=(20, 3))
+        apart /= np.linalg.norm(apart, axis=1, keepdims=True)
+        pairs_hot = np.concatenate([near, near + 0.2525 * apart])
+        pairs_cold = np.concatenate([near, near + 0.001 * apart]) @ turn.T
+        hot2, cold2 = np.concatenate([hot, pairs_hot]), np.concatenate([hot @ turn.T, pairs_cold])
+        count = _every_kept_pair(hot2, cold2, 1.0)[0]
+        assert count >= 20 and closing_pairs(hot2, cold2, 1.0) == count
 
 
 def test_the_left_out_estimate_tells_how_well_the_nodes_know_the_field():

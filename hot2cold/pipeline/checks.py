@@ -816,16 +816,56 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
     keys = np.floor(np.column_stack([hot, cold]) / cell).astype(np.int64)
     keep = np.unique(keys, axis=0, return_index=True)[1]
     hot, cold = hot[keep], cold[keep]
-    pairs = cKDTree(cold).query_pairs(2.0 * spacing + 2.0 * eps, output_type="ndarray")
+    reach, margin = 2.0 * spacing + 2.0 * eps, spacing - 6.0 * eps
+    if margin > 0.0:
+        may = _may_close(cold, cold - hot, reach, margin)
+        hot, cold = hot[may], cold[may]
+    pairs = cKDTree(cold).query_pairs(reach, output_type="ndarray")
     if not len(pairs):
         return 0
-    margin = spacing - 6.0 * eps
     if margin > 0.0:                # d_hot > 2 d_cold + margin needs d_hot^2 > 4 d_cold^2 + margin^2: no root for most
         dh, dc = hot[pairs[:, 0]] - hot[pairs[:, 1]], cold[pairs[:, 0]] - cold[pairs[:, 1]]
         pairs = pairs[np.einsum("ij,ij->i", dh, dh) > 4.0 * np.einsum("ij,ij->i", dc, dc) + margin * margin]
     d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
     d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
     return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
+
+
+def _may_close(cold: np.ndarray, moves: np.ndarray, reach: float, margin: float) -> np.ndarray:
+    """``(m,)`` bool: the points of ``cold (m, 3)``, moved by ``moves (m, 3)`` from hot, that may be in a pair less
+    than ``reach`` apart cold with ``d_hot > 2 d_cold + margin`` (``margin > 0``), a necessary condition checked
+    cell by cell so that the pairs of the others are never listed.
+
+    With the moves split into an affine part and the rest, ``m = A x + c + r`` (``x`` cold, ``A`` the least-squares
+    fit over all points, taken where its 2-norm is below 1, else ``A = 0``): ``d_hot <= d_cold + |m_i - m_j|`` and
+    ``|m_i - m_j| <= |A| d_cold + |r_i - r_j|``, so such a pair has ``|r_i - r_j| > (1 - |A|) d_cold + margin``,
+    more than ``margin``.  Its points lie in the same or neighbouring cubes of side ``reach`` (cold), and the
+    diagonal of the box of two cubes' ``r`` bounds how much any two of them differ: only points of cubes with a
+    neighbour (or themselves) whose joint box is wider than ``margin`` are kept.  What the affine part leaves of
+    a smooth field (its rotation and strain, which turn a blade by degrees) differs far less than ``margin`` over
+    two cubes, so most parts keep few points or none."""
+    centre = cold.mean(axis=0)
+    design = np.column_stack([cold - centre, np.ones(len(cold))])
+    fit = np.linalg.lstsq(design, moves, rcond=None)[0]                      # (4, 3)
+    rest = moves - design @ fit if np.linalg.norm(fit[:3], 2) < 1.0 else moves
+    keys = np.floor(cold / reach).astype(np.int64)
+    keys -= keys.min(axis=0) - 1                             # from 1, so that every neighbour's key is >= 0
+    size = keys.max(axis=0) + 2
+    codes = (keys[:, 0] * size[1] + keys[:, 1]) * size[2] + keys[:, 2]
+    cells, of = np.unique(codes, return_inverse=True)
+    order = np.argsort(of, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(of[order]) != 0])
+    low = np.minimum.reduceat(rest[order], starts, axis=0)   # (cells, 3): the box of each cube's r
+    high = np.maximum.reduceat(rest[order], starts, axis=0)
+    wide = np.zeros(len(cells), bool)
+    limit = margin * margin * (1.0 - 1e-9)                   # (rounding may keep more, never fewer)
+    for step in (np.array([di, dj, dk]) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)):
+        wanted = cells + (step[0] * size[1] + step[1]) * size[2] + step[2]
+        there = np.minimum(np.searchsorted(cells, wanted), len(cells) - 1)
+        found = np.flatnonzero(cells[there] == wanted)
+        span = np.maximum(high[found], high[there[found]]) - np.minimum(low[found], low[there[found]])
+        wide[found[np.einsum("ij,ij->i", span, span) > limit]] = True
+    return wide[of]
 
 
 def _check_crossing(part: Part, cold_kernel: ColdKernel, problems: dict[int, list[str]]) -> None:
