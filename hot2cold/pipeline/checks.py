@@ -810,7 +810,8 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
     Pairs of the points kept are counted with the margins widened by ``eps`` on each point (either distance
     changes by up to ``2 eps``: ``d_hot > 2 d_cold + spacing - 6 eps`` within ``2 spacing + 2 eps``), so a pair
     of the whole set that qualifies has a pair of kept points that does: the count may grow, a closing gap is
-    not missed."""
+    not missed.  Pairs are listed only among the points :func:`_may_close` finds may be in one (none, most times:
+    a smooth field's moves differ too little over the reach)."""
     eps = _SAME_SHARE * spacing
     cell = eps / np.sqrt(3.0)                                # one cell: within eps of each other hot and cold
     keys = np.floor(np.column_stack([hot, cold]) / cell).astype(np.int64)
