@@ -522,6 +522,8 @@ def test_closing_pairs_lists_only_the_pairs_of_cells_whose_moves_differ():
     cells none), and the count is the one over every pair of the points kept."""
     from hot2cold.pipeline.checks import _SAME_SHARE, _may_close, closing_pairs
 
+    assert closing_pairs(np.zeros((0, 3)), np.zeros((0, 3)), 1.0) == 0          # no point, one point: no pair
+    assert closing_pairs(np.zeros((1, 3)), np.ones((1, 3)), 1.0) == 0
     angle = np.radians(3.0)
     turn = np.array([[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]])
     for trial in range(6):

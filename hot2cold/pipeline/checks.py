@@ -818,7 +818,7 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
     keep = np.unique(keys, axis=0, return_index=True)[1]
     hot, cold = hot[keep], cold[keep]
     reach, margin = 2.0 * spacing + 2.0 * eps, spacing - 6.0 * eps
-    if margin > 0.0:
+    if margin > 0.0 and len(cold) > 1:
         may = _may_close(cold, cold - hot, reach, margin)
         hot, cold = hot[may], cold[may]
     pairs = cKDTree(cold).query_pairs(reach, output_type="ndarray")
