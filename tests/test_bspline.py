@@ -463,3 +463,25 @@ def test_remembered_rows_are_bounded_private_and_not_pickled():
     assert not memo._rows and memo._bytes == 0
     surface_first_jet(s, u, v)                      # a closed memo keeps nothing more
     assert not memo._rows and memo._bytes == 0
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_large_evaluations_in_chunks_are_the_whole_ones_to_the_bit(rational):
+    """Points, derivatives, normals and jets of more than two chunks of parameters (``EVAL_CHUNK``, the last one
+    longer) are those of one evaluation of them all, to the bit, with a scalar ``v`` broadcast as before."""
+    from hot2cold.core import bspline
+
+    rng = np.random.default_rng(11)
+    surface = random_surface(rng, 3, 2, rational)
+    u0, u1, v0, v1 = surface.domain
+    m = 2 * bspline.EVAL_CHUNK + 17
+    u, v = rng.uniform(u0, u1, m), rng.uniform(v0, v1, m)
+    for evaluate in (bspline.evaluate_surface, bspline.surface_derivatives, bspline.surface_first_jet,
+                     bspline.surface_normals, bspline.normals_and_rounding, bspline.surface_jet):
+        for vv in (v, v0):
+            chunked, whole = evaluate(surface, u, vv), evaluate.__wrapped__(surface, u, vv)
+            chunked, whole = ((x,) if isinstance(x, np.ndarray) else x for x in (chunked, whole))
+            assert len(chunked) == len(whole)
+            for a, b in zip(chunked, whole):
+                assert a.shape[0] == m
+                np.testing.assert_array_equal(a, b)
