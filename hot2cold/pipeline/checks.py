@@ -17,6 +17,7 @@
 """
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 from dataclasses import dataclass
@@ -829,7 +830,7 @@ def closing_pairs(hot: np.ndarray, cold: np.ndarray, spacing: float) -> int:
         pairs = pairs[np.einsum("ij,ij->i", dh, dh) > 4.0 * np.einsum("ij,ij->i", dc, dc) + margin * margin]
     d_hot = np.linalg.norm(hot[pairs[:, 0]] - hot[pairs[:, 1]], axis=1)
     d_cold = np.linalg.norm(cold[pairs[:, 0]] - cold[pairs[:, 1]], axis=1)
-    return int(np.count_nonzero(d_hot > 2.0 * d_cold + spacing - 6.0 * eps))
+    return int(np.count_nonzero(d_hot > 2.0 * d_cold + margin))
 
 
 def _may_close(cold: np.ndarray, moves: np.ndarray, reach: float, margin: float) -> np.ndarray:
@@ -860,8 +861,8 @@ def _may_close(cold: np.ndarray, moves: np.ndarray, reach: float, margin: float)
     high = np.maximum.reduceat(rest[order], starts, axis=0)
     wide = np.zeros(len(cells), bool)
     limit = margin * margin * (1.0 - 1e-9)                   # (rounding may keep more, never fewer)
-    for step in (np.array([di, dj, dk]) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)):
-        wanted = cells + (step[0] * size[1] + step[1]) * size[2] + step[2]
+    for di, dj, dk in itertools.product((-1, 0, 1), repeat=3):           # the cube itself and its 26 neighbours
+        wanted = cells + (di * size[1] + dj) * size[2] + dk
         there = np.minimum(np.searchsorted(cells, wanted), len(cells) - 1)
         found = np.flatnonzero(cells[there] == wanted)
         span = np.maximum(high[found], high[there[found]]) - np.minimum(low[found], low[there[found]])
