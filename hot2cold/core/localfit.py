@@ -27,6 +27,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .trees import kd_tree, query
+
 #: Quadratic monomials: products of the coordinate offsets (x x, y y, z z, x y, x z, y z).
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 #: Relative cut-off of the singular values of a linear fit (pseudo-inverse): a neighbourhood that spreads by
@@ -362,7 +364,8 @@ def scatter(points: np.ndarray, values: np.ndarray, groups: list[np.ndarray] | N
 
 def _left_out(points: np.ndarray, values: np.ndarray, at: np.ndarray, neighbours: int) -> np.ndarray:
     """``|r|^2 / (1 + |a|^2)`` ``(c,)`` of :func:`scatter` at the points ``at (c,)`` of ``points (n, 3)``."""
-    _, idx = cKDTree(points).query(points[at], k=neighbours + 1)
+    # the quick build: a face's hundreds of thousands of nodes for a few thousand queries
+    _, idx = query(kd_tree(points), points[at], k=neighbours + 1)
     idx = idx[:, 1:]                                                            # the point itself left out
     offsets = points[idx] - points[at][:, None, :]                              # (c, k, 3)
     centred = offsets - offsets.mean(axis=1, keepdims=True)

@@ -359,6 +359,34 @@ class _Reach:
     edge: float
 
 
+@dataclass(frozen=True, eq=False)
+class _FaceFeet:
+    """Foot points of ``m`` nodes on one face, as offered to the nodes (:func:`_classify_group`).
+
+    Attributes
+    ----------
+    uv : (m, 2) float, the foot points' parameters.
+    distance : (m,) float, node to foot point (mm).
+    inside : (m,) bool, the foot point was asked about (near enough) and lies in the face's trimmed domain.
+    foot : (m, 3) float, the foot point on the surface where ``inside``, NaN elsewhere.
+    """
+
+    uv: np.ndarray
+    distance: np.ndarray
+    inside: np.ndarray
+    foot: np.ndarray
+
+    @classmethod
+    def of(cls, face, projector: Projector, feet: FootPoints, near: np.ndarray) -> _FaceFeet:
+        """The foot points ``feet`` on ``face``, those of ``near (m,)`` classified in its trimmed domain (the rest
+        are not inside) and evaluated where inside: the per-node work of a face, done in the face's thread."""
+        inside = np.zeros(len(near), bool)
+        inside[near] = projector.classify(face.index, feet.uv[near]) != Trim.OUTSIDE
+        foot = np.full((len(near), 3), np.nan)
+        foot[inside] = evaluate_surface(face.surface, feet.uv[inside, 0], feet.uv[inside, 1])
+        return cls(feet.uv, feet.distance, inside, foot)
+
+
 def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, np.ndarray], starts: Starts,
                     threads: int = 1) -> Classification:
     """Classify ``points (N, 3)`` on the faces of the candidate ``pairs`` ``(pair_node, pair_face)`` (each
@@ -372,41 +400,45 @@ def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, 
     role, owner, uv, foot, distance = rows.role, rows.owner, rows.uv, rows.foot, rows.distance
     best = np.full(n, np.inf)
 
-    def offer(k: int, nodes: np.ndarray, f_uv: np.ndarray, f_dist: np.ndarray) -> None:
-        """Face ``k`` takes those of ``nodes`` whose foot point on it is inside, near and nearest so far."""
-        near = (f_dist <= node_distance) & (f_dist < best[nodes])
-        inside = np.zeros(len(nodes), bool)
-        inside[near] = projector.classify(k, f_uv[near]) != Trim.OUTSIDE
-        chosen = nodes[inside]
-        best[chosen] = f_dist[inside]
-        role[chosen] = Role.FACE
-        owner[chosen] = k
-        uv[chosen] = f_uv[inside]
+    def offer(k: int, nodes: np.ndarray, feet: _FaceFeet) -> None:
+        """Face ``k`` takes those of ``nodes`` whose foot point on it (``feet``, one row per node) is inside, near
+        and nearest so far."""
+        chosen = feet.inside & (feet.distance < best[nodes])
+        idx = nodes[chosen]
+        best[idx] = feet.distance[chosen]
+        role[idx] = Role.FACE
+        owner[idx] = k
+        uv[idx] = feet.uv[chosen]
+        foot[idx] = feet.foot[chosen]
 
-    # Newton's method on every candidate pair first; the kernel then settles the pairs it did not give to
-    # the face (a foot point on the border of the face's box, mostly a node of the neighbouring face; a
-    # foot point too far or trimmed away), unless the node already has a foot point elsewhere nearer than
-    # Newton's last iterate on this face (which has no foot point inside the box nearer still: that would
-    # be a second local minimum within ``node_distance``).
+    # Newton's method on every candidate pair first, its foot points' trim states and points on the surface in
+    # the same thread; the kernel then settles the pairs it did not give to the face (a foot point on the border
+    # of the face's box, mostly a node of the neighbouring face; a foot point too far or trimmed away), unless
+    # the node already has a foot point elsewhere nearer than Newton's last iterate on this face (which has no
+    # foot point inside the box nearer still: that would be a second local minimum within ``node_distance``).
     unsettled = []
     faces = [(k, pair_node[group], projector.face_box(k)) for k, group in runs(pair_face)]
     on_surface = ON_SURFACE * part.diagonal
-    feet = map_threads(lambda job: _foot_points(part.faces[job[0]], points[job[1]], starts.of(job[0]), job[2],
-                                                on_surface), faces, threads, cost=[len(nodes) for _, nodes, _ in faces])
-    for (k, nodes, _), fp in zip(faces, feet):
-        offer(k, nodes[fp.settled], fp.uv[fp.settled], fp.distance[fp.settled])
+
+    def newton(job) -> tuple[FootPoints, _FaceFeet]:
+        k, nodes, box = job
+        fp = _foot_points(part.faces[k], points[nodes], starts.of(k), box, on_surface)
+        return fp, _FaceFeet.of(part.faces[k], projector, fp, fp.settled & (fp.distance <= node_distance))
+
+    found = map_threads(newton, faces, threads, cost=[len(nodes) for _, nodes, _ in faces])
+    for (k, nodes, _), (fp, feet) in zip(faces, found):
+        offer(k, nodes, feet)
         taken = fp.settled & (owner[nodes] == k) & (best[nodes] == fp.distance)
         unsettled.append((k, nodes[~taken], fp.distance[~taken]))
     for k, nodes, last in unsettled:
         nodes = nodes[last < best[nodes]]
         if len(nodes):
-            offer(k, nodes, *projector.to_face(k, points[nodes]))
+            fp = FootPoints(*projector.to_face(k, points[nodes]), np.ones(len(nodes), bool))
+            offer(k, nodes, _FaceFeet.of(part.faces[k], projector, fp,
+                                         (fp.distance <= node_distance) & (fp.distance < best[nodes])))
         log.debug("face %d: %d foot points by the kernel", k, len(nodes))
-    on_face = np.flatnonzero(role == Role.FACE)
-    for k in np.unique(owner[on_face]):
-        idx = on_face[owner[on_face] == k]
-        foot[idx] = evaluate_surface(part.faces[k].surface, uv[idx, 0], uv[idx, 1])
-        distance[idx] = best[idx]
+    on_face = role == Role.FACE
+    distance[on_face] = best[on_face]
 
     _claim_vertices_and_edges(reach, points, rows, np.unique(pair_node), np.unique(pair_face))
     return rows
