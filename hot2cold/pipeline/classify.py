@@ -284,11 +284,17 @@ def part_distances(part: Part, points: np.ndarray, projector: Projector, reach: 
                                                 projector.face_box(job[0]), on_surface), faces, threads,
                        cost=[len(nodes) for _, nodes in faces])
     for (k, nodes), fp in zip(faces, feet):
-        near = fp.settled & (fp.distance <= reach) & (fp.distance < best[nodes])
-        inside = np.zeros(len(nodes), bool)
-        inside[near] = projector.classify(k, fp.uv[near]) != Trim.OUTSIDE
+        inside = _inside(projector, k, fp.uv, fp.settled & (fp.distance <= reach) & (fp.distance < best[nodes]))
         best[nodes[inside]] = fp.distance[inside]
     return best
+
+
+def _inside(projector: Projector, k: int, uv: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Which of the foot points ``uv (m, 2)`` on face ``k`` lie in its trimmed domain (or on its border),
+    ``(m,)`` bool: those of ``near (m,)`` asked of the projector, the rest not inside."""
+    inside = np.zeros(len(uv), bool)
+    inside[near] = projector.classify(k, uv[near]) != Trim.OUTSIDE
+    return inside
 
 
 #: Starts a node looks among for one on the far side of a thin edge (:func:`_foot_points`).
@@ -380,8 +386,7 @@ class _FaceFeet:
     def of(cls, face, projector: Projector, feet: FootPoints, near: np.ndarray) -> _FaceFeet:
         """The foot points ``feet`` on ``face``, those of ``near (m,)`` classified in its trimmed domain (the rest
         are not inside) and evaluated where inside: the per-node work of a face, done in the face's thread."""
-        inside = np.zeros(len(near), bool)
-        inside[near] = projector.classify(face.index, feet.uv[near]) != Trim.OUTSIDE
+        inside = _inside(projector, face.index, feet.uv, near)
         foot = np.full((len(near), 3), np.nan)
         foot[inside] = evaluate_surface(face.surface, feet.uv[inside, 0], feet.uv[inside, 1])
         return cls(feet.uv, feet.distance, inside, foot)
