@@ -316,24 +316,36 @@ def _spans(x: np.ndarray, knots: np.ndarray, degree: int, last: int) -> np.ndarr
     return np.minimum(np.maximum(np.searchsorted(knots, x, side="right") - 1, degree), last)
 
 
+@functools.lru_cache(maxsize=None)
+def _knot_offsets(degree: int) -> np.ndarray:
+    """The offsets ``(2 degree,)`` from a span ``s`` of the knots :func:`_triangle` reads: ``s - j``, then
+    ``s + 1 + j``, for ``j = 0 .. degree - 1`` (read-only: one array per degree)."""
+    offsets = np.concatenate([-np.arange(degree), 1 + np.arange(degree)])
+    offsets.flags.writeable = False
+    return offsets
+
+
 def _triangle(x: np.ndarray, knots: np.ndarray, degree: int, lowest: int, last: int
-              ) -> tuple[np.ndarray, list[np.ndarray]]:
+              ) -> tuple[np.ndarray, list[list[np.ndarray]]]:
     """The non-zero B-splines of every degree ``lowest .. degree`` at ``x (m,)`` by the Cox-de Boor triangle
-    (The NURBS Book, A2.2), vectorised over ``x`` and, degree by degree, over the functions: the span ``s (m,)``
-    of each parameter and, per degree ``d``, the values ``(m, d + 1)`` of the degree-``d`` B-splines
-    ``s - d .. s`` on ``knots`` (``last``: :func:`_spans`)."""
+    (The NURBS Book, A2.2), vectorised over ``x``: the span ``s (m,)`` of each parameter and, per degree ``d``, the
+    values of the degree-``d`` B-splines ``s - d .. s`` on ``knots`` as ``d + 1`` arrays ``(m,)`` (``last``:
+    :func:`_spans`).  Worked column by column, so that every step runs over ``m`` contiguous values."""
     s = _spans(x, knots, degree, last)
-    steps = np.arange(1, degree + 1)
-    left = x[:, None] - knots[s[:, None] + 1 - steps]             # (m, degree): x - knots[s + 1 - j]
-    right = knots[s[:, None] + steps] - x[:, None]                # (m, degree): knots[s + j] - x
-    values = np.ones((len(x), 1))
+    near = knots[s + _knot_offsets(degree)[:, None]]              # (2 degree, m)
+    left = x - near[:degree]                                      # left[j] = x - knots[s - j]
+    right = near[degree:] - x                                     # right[j] = knots[s + 1 + j] - x
+    values = [np.ones(len(x))]
     out = [values] if lowest == 0 else []
     for j in range(1, degree + 1):
-        below, above = right[:, :j], left[:, j - 1::-1]
-        temp = values / (below + above)                           # (m, j)
-        values = np.zeros((len(x), j + 1))
-        values[:, :j] = below * temp
-        values[:, 1:] += above * temp
+        raised, saved = [], None
+        for r in range(j):
+            temp = values[r] / (right[r] + left[j - 1 - r])
+            term = right[r] * temp
+            raised.append(term if saved is None else term + saved)
+            saved = left[j - 1 - r] * temp
+        raised.append(saved)
+        values = raised
         if j >= lowest:
             out.append(values)
     return s, out
@@ -352,7 +364,7 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int, layout: K
     ``t`` is a degree-``(p - k)`` spline on ``t[k:-k]``, whose coefficients are repeated scaled differences
     ``d (c_{j+1} - c_j) / (T[j+d+1] - T[j+1])`` of the original ones.  So the degree-``(p - k)`` rows (from the
     same Cox-de Boor triangle, :func:`_triangle`) are multiplied by ``k`` bidiagonal difference matrices, done
-    here row-wise.
+    here column by column.
     """
     p = degree
     m = x.shape[0]
@@ -360,24 +372,22 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int, layout: K
         return np.zeros(0, dtype=np.int64), [np.zeros((0, p + 1)) for _ in range(nu + 1)]
     if layout is None:
         layout = KnotLayout(knots, degree)
-    span, lower = _triangle(x, knots, p, max(p - nu, 0), layout.last)   # lower[i]: degree max(p - nu, 0) + i
+    lowest = max(p - nu, 0)
+    span, lower = _triangle(x, knots, p, lowest, layout.last)     # lower[i]: degree lowest + i
     start = span - p
     out = []
     for k in range(nu + 1):
         if k > p:
             out.append(np.zeros((m, p + 1)))
             continue
-        d0 = p - k
-        vals = lower[d0 - max(p - nu, 0)]
-        # Raise the degree-d0 row back to the degree-p index space: multiply by Diff_d, d = d0+1 .. p.
-        for d in range(d0 + 1, p + 1):
-            w = vals.shape[1]
-            pv = vals * layout.factors[d][start[:, None] + np.arange(w)]
-            new = np.zeros((m, w + 1))
-            new[:, :w] -= pv
-            new[:, 1:] += pv
-            vals = new
-        out.append(vals)
+        vals = lower[p - k - lowest]
+        # Raise the degree-(p - k) row back to the degree-p index space: multiply by Diff_d, d = p - k + 1 .. p.
+        for d in range(p - k + 1, p + 1):
+            factors = layout.factors[d]
+            scaled = [v * factors[start + a] for a, v in enumerate(vals)]
+            vals = ([0.0 - scaled[0]] + [scaled[a - 1] - scaled[a] for a in range(1, len(scaled))]
+                    + [scaled[-1] + 0.0])
+        out.append(np.stack(vals, axis=1))
     return start, out
 
 
