@@ -387,7 +387,10 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int, layout: K
             scaled = [v * factors[start + a] for a, v in enumerate(vals)]
             vals = ([0.0 - scaled[0]] + [scaled[a - 1] - scaled[a] for a in range(1, len(scaled))]
                     + [scaled[-1] + 0.0])
-        out.append(np.stack(vals, axis=1))
+        rows = np.empty((m, p + 1))
+        for a, v in enumerate(vals):
+            rows[:, a] = v
+        out.append(rows)
     return start, out
 
 
@@ -502,18 +505,21 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     nv = surface.shape[1]
     su, bu = _span_rows(uu, surface.u_knots, p, nu, lu)
     sv, bv = _span_rows(vv, surface.v_knots, q, nu, lv)
-    m = uu.shape[0]
-    cols = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv
-            + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
+    # row-wise Kronecker products, column a (q + 1) + b of u's column a and v's column b, as products of u's
+    # columns repeated and v's tiled (numpy broadcasts (m, p + 1, 1) against (m, 1, q + 1) several times slower)
+    m = len(uu)
 
-    def kron(a, b):
-        return (a[:, :, None] * b[:, None, :]).reshape(m, (p + 1) * (q + 1))
+    def tiled(b):                                   # np.tile(b, (1, p + 1)) without its fixed cost
+        return b[:, None, :].repeat(p + 1, axis=1).reshape(m, (p + 1) * (q + 1))
 
-    vals = [kron(bu[0], bv[0])]
+    cols = ((su[:, None] + np.arange(p + 1)) * nv).repeat(q + 1, axis=1) + tiled(sv[:, None] + np.arange(q + 1))
+    along_u = [b.repeat(q + 1, axis=1) for b in bu]
+    along_v = [tiled(b) for b in bv]
+    vals = [along_u[0] * along_v[0]]
     if nu:
-        vals += [kron(bu[1], bv[0]), kron(bu[0], bv[1])]
+        vals += [along_u[1] * along_v[0], along_u[0] * along_v[1]]
     if nu > 1:
-        vals += [kron(bu[2], bv[0]), kron(bu[1], bv[1]), kron(bu[0], bv[2])]
+        vals += [along_u[2] * along_v[0], along_u[1] * along_v[1], along_u[0] * along_v[2]]
     if surface.weights is not None:
         # quotient rule on R = A / W, A = w N (columns), W = sum A, and their derivatives
         wcols = surface.weights.reshape(-1)[cols]
