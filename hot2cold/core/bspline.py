@@ -484,6 +484,14 @@ def _surface_parameters(surface: BSplineSurface, u, v) -> tuple[np.ndarray, np.n
     return uu, vv
 
 
+def _net_columns(su: np.ndarray, sv: np.ndarray, p: int, q: int, nv: int) -> np.ndarray:
+    """The flat indices ``(m, (p + 1) (q + 1))`` into a net of ``nv`` columns of the poles each row of a surface
+    basis reads: ``(su + a) nv + sv + b`` in column ``a (q + 1) + b``, from the rows' first poles ``su``, ``sv``
+    ``(m,)`` (one broadcast against the constant offsets: numpy's broadcast of ``(m, p + 1, 1)`` against ``(m, 1,
+    q + 1)`` costs several times as much)."""
+    return (su * nv + sv)[:, None] + (np.arange(p + 1)[:, None] * nv + np.arange(q + 1)).ravel()
+
+
 def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     """Fixed-width tensor-product rows up to derivatives of order ``nu`` (0, 1 or 2).
 
@@ -505,21 +513,19 @@ def _surface_rows(surface: BSplineSurface, u, v, nu: int):
     nv = surface.shape[1]
     su, bu = _span_rows(uu, surface.u_knots, p, nu, lu)
     sv, bv = _span_rows(vv, surface.v_knots, q, nu, lv)
-    # row-wise Kronecker products, column a (q + 1) + b of u's column a and v's column b, as products of u's
-    # columns repeated and v's tiled (numpy broadcasts (m, p + 1, 1) against (m, 1, q + 1) several times slower)
-    m = len(uu)
+    m, width = len(uu), (p + 1) * (q + 1)
+    cols = _net_columns(su, sv, p, q, nv)
+    # row-wise Kronecker products, column a (q + 1) + b of u's column a and v's column b (einsum forms them
+    # several times faster than numpy's broadcast of (m, p + 1, 1) by (m, 1, q + 1), without temporaries)
 
-    def tiled(b):                                   # np.tile(b, (1, p + 1)) without its fixed cost
-        return b[:, None, :].repeat(p + 1, axis=1).reshape(m, (p + 1) * (q + 1))
+    def kron(a, b):
+        return np.einsum("ma,mb->mab", a, b).reshape(m, width)
 
-    cols = ((su[:, None] + np.arange(p + 1)) * nv).repeat(q + 1, axis=1) + tiled(sv[:, None] + np.arange(q + 1))
-    along_u = [b.repeat(q + 1, axis=1) for b in bu]
-    along_v = [tiled(b) for b in bv]
-    vals = [along_u[0] * along_v[0]]
+    vals = [kron(bu[0], bv[0])]
     if nu:
-        vals += [along_u[1] * along_v[0], along_u[0] * along_v[1]]
+        vals += [kron(bu[1], bv[0]), kron(bu[0], bv[1])]
     if nu > 1:
-        vals += [along_u[2] * along_v[0], along_u[1] * along_v[1], along_u[0] * along_v[2]]
+        vals += [kron(bu[2], bv[0]), kron(bu[1], bv[1]), kron(bu[0], bv[2])]
     if surface.weights is not None:
         # quotient rule on R = A / W, A = w N (columns), W = sum A, and their derivatives
         wcols = surface.weights.reshape(-1)[cols]
@@ -899,8 +905,7 @@ def _homogeneous_derivatives(surface: BSplineSurface, u, v) -> list[np.ndarray]:
     # The (p+1) x (q+1) block of homogeneous poles of each row: (m, (p+1) (q+1), width).  (np.take on the flat
     # array gathers many times faster than fancy indexing of the 3-D one.)
     m = len(su)
-    flat_index = ((su[:, None] + np.arange(p + 1))[:, :, None] * nv_
-                  + (sv[:, None] + np.arange(q + 1))[:, None, :]).reshape(m, (p + 1) * (q + 1))
+    flat_index = _net_columns(su, sv, p, q, nv_)
     block = np.take(homo.reshape(-1, width), flat_index, axis=0).reshape(m, p + 1, q + 1, width)
     # summed over v first for the three v-derivatives at once, then over u for each pair
     along_v = np.matmul(np.stack(bv, axis=1)[:, None, :, :], block)                 # (m, p + 1, 3, width)
