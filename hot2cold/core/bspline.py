@@ -381,7 +381,8 @@ def _span_rows(x: np.ndarray, knots: np.ndarray, degree: int, nu: int, layout: K
             out.append(np.zeros((m, p + 1)))
             continue
         vals = lower[p - k - lowest]
-        # Raise the degree-(p - k) row back to the degree-p index space: multiply by Diff_d, d = p - k + 1 .. p.
+        # Raise the degree-(p - k) row back to the degree-p index space: multiply by Diff_d, d = p - k + 1 .. p
+        # (the end columns as 0.0 - x and x + 0.0: zeros keep the sign a difference from zero gives them).
         for d in range(p - k + 1, p + 1):
             factors = layout.factors[d]
             scaled = [v * factors[start + a] for a, v in enumerate(vals)]
