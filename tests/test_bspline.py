@@ -199,6 +199,29 @@ def random_affine(rng):
 
 
 @pytest.mark.parametrize("rational", [False, True])
+def test_surface_digest_tells_content_not_objects(rational):
+    """Records equal to the bit give one digest, made apart or copied; any pole, knot or weight changed (even a
+    zero's sign, another bit pattern) gives another."""
+    rng = np.random.default_rng(7 + rational)
+    s = random_surface(rng, 3, 2, rational)
+    copy = BSplineSurface(s.poles.copy(), s.u_knots.copy(), s.v_knots.copy(), s.u_degree, s.v_degree,
+                          None if s.weights is None else s.weights.copy())
+    assert copy is not s and copy.digest() == s.digest() == s.with_poles(s.poles.copy()).digest()
+    poles = s.poles.copy()
+    poles[1, 1, 2] = np.nextafter(poles[1, 1, 2], np.inf)
+    knots = s.u_knots.copy()
+    knots[s.u_degree + 1] = np.nextafter(knots[s.u_degree + 1], np.inf)
+    others = [s.with_poles(poles), BSplineSurface(s.poles, knots, s.v_knots, s.u_degree, s.v_degree, s.weights)]
+    if rational:
+        weights = s.weights.copy()
+        weights[0, 0] *= 1.5
+        others.append(BSplineSurface(s.poles, s.u_knots, s.v_knots, s.u_degree, s.v_degree, weights))
+    else:
+        others.append(BSplineSurface(s.poles, s.u_knots, s.v_knots, s.u_degree, s.v_degree, np.ones(s.shape)))
+    assert len({s.digest(), *(o.digest() for o in others)}) == len(others) + 1
+
+
+@pytest.mark.parametrize("rational", [False, True])
 def test_curve_affine_invariance(rational):
     rng = np.random.default_rng(31 + rational)
     for p in (1, 2, 3, 5):

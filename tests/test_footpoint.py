@@ -80,6 +80,29 @@ def test_newton_leaves_border_minima_open(part):
     assert np.all((fp.uv[:, 0] >= box[0]) & (fp.uv[:, 0] <= box[1]))
 
 
+def test_a_node_beyond_the_box_slides_to_the_nearest_point_of_its_side(monkeypatch):
+    """A node whose nearest point lies beyond one side of the box ends, unsettled, at the nearest point of that
+    side, in a few steps: on a plane parametrised askew, ``S(u, v) = (u + v / 2, v, 0)``, the point
+    ``(-0.5, 0.5, 0.3)`` is nearest ``S(-0.75, 0.5)``; of the side ``u = 0`` it is nearest ``S(0, 0.2)``
+    (``d/dv |S(0, v) - P|^2 = 0``), at ``sqrt(0.54)``.  The full Newton step clipped to the side stops at
+    ``v = 0.5`` instead, farther."""
+    from hot2cold.core import footpoint
+
+    plane = BSplineSurface(np.array([[[0.0, 0.0, 0.0], [0.5, 1.0, 0.0]], [[1.0, 0.0, 0.0], [1.5, 1.0, 0.0]]]),
+                           [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0], 1, 1)
+    points = np.array([[-0.5, 0.5, 0.3], [-0.5, 0.25, 0.3]])
+    starts = np.array([[0.3, 0.7], [0.1, 0.1]])
+    jets = []
+    real_jet = footpoint.surface_jet
+    monkeypatch.setattr(footpoint, "surface_jet", lambda *a: jets.append(len(a[1])) or real_jet(*a))
+    fp = project_to_surface(plane, points, starts)
+    assert not fp.settled.any()
+    # the second: d/dv ((v/2 + 1/2)^2 + (v - 1/4)^2) = 0 at v = 0
+    assert np.allclose(fp.uv, [[0.0, 0.2], [0.0, 0.0]], rtol=0.0, atol=1e-9)
+    assert np.allclose(fp.distance, np.sqrt([0.54, 0.25 + 0.0625 + 0.09]), rtol=1e-9)
+    assert len(jets) <= 4            # a step to the side, a step along it, and the steps that find it stuck
+
+
 def test_newton_checks_its_input():
     part = load_part(SAMPLES / "twisted_blade.step", Settings())
     surface = part.faces[0].surface

@@ -16,6 +16,7 @@ Conventions
 from __future__ import annotations
 
 import functools
+import hashlib
 import threading
 from dataclasses import dataclass, replace
 from math import comb as _comb
@@ -152,6 +153,18 @@ class BSplineSurface:
             found = (KnotLayout(self.u_knots, self.u_degree), KnotLayout(self.v_knots, self.v_degree))
             object.__setattr__(self, "_layout", found)
         return found
+
+    def digest(self) -> bytes:
+        """16 bytes of the surface's content (degrees, knots, poles, weights), worked out on each call: equal for
+        records equal to the bit.  The key of caches that should find a surface made again as another object
+        (a correction run again on the same fits)."""
+        found = hashlib.blake2b(digest_size=16)
+        found.update(np.array([self.u_degree, self.v_degree, self.weights is not None]).tobytes())
+        for array in (self.u_knots, self.v_knots, self.poles, self.weights):
+            if array is not None:
+                found.update(str(array.shape).encode())
+                found.update(np.ascontiguousarray(array).tobytes())
+        return found.digest()
 
     def with_poles(self, poles: np.ndarray) -> "BSplineSurface":
         """The same surface (degrees, knots, weights) with another control net ``(nu, nv, 3)``."""

@@ -14,7 +14,9 @@ a node on a face's edge, whose last step points out of the box or into it by the
 distance is no larger than its start's.
 Nodes that do not settle (the minimum lies on the box's border, Newton wanders, or it did not converge in
 ``MAX_ITERATIONS``) are for the caller to hand to the kernel's ``GeomAPI_ProjectPointOnSurf``, which stays
-the reference.
+the reference.  A node whose step leaves the box in one parameter slides along that side by Newton in the
+other alone, so that it ends, in a few steps, at the side's nearest point: the distance the caller weighs
+against the node's foot points on other faces before asking the kernel.
 
 A settled node is at a local minimum of the distance no farther than its start.  It is the kernel's (global)
 foot point when the start lies in that minimum's basin, which the caller ensures by starting each node at
@@ -155,7 +157,8 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
             step = -np.column_stack([h11 * g[:, 0] - h01 * g[:, 1], h00 * g[:, 1] - h01 * g[:, 0]]) / det[:, None]
         bad = ~np.all(np.isfinite(step), axis=1)
         step[bad] = 0.0
-        target = uv[active] + step
+        target = _slide_along_border(uv[active] + step, uv[active], g, (h00, h11),
+                                     (lo - STEP_RTOL * scale, hi + STEP_RTOL * scale))
         new = np.clip(target, lo, hi)
         # pushed back into the box by more than a settling step (a node on the border settles either way)
         clamped = np.any(np.abs(new - target) > STEP_RTOL * scale, axis=1)
@@ -177,6 +180,27 @@ def _newton(surface: BSplineSurface, p: np.ndarray, start: np.ndarray, lo: np.nd
         distance[rest] = np.linalg.norm(evaluate_surface(surface, uv[rest, 0], uv[rest, 1]) - p[rest], axis=1)
     settled &= distance <= start_distance * (1 + 1e-12) + 1e-12
     return uv, distance, settled
+
+
+def _slide_along_border(target: np.ndarray, uv: np.ndarray, g: np.ndarray, diagonal: tuple[np.ndarray, np.ndarray],
+                        box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Newton's ``target (a, 2)`` from ``uv (a, 2)`` made a step along the box's side (in place; returned) where
+    it leaves ``box`` (``(lo, hi)``, each ``(2,)``) in one parameter only: the other takes the one-parameter step
+    ``-g_i / H_ii`` (``g (a, 2)``, ``diagonal`` the Hessian's ``(H_00, H_11)``, each ``(a,)``, positive where
+    finite).  The first parameter is then clipped to the side, and the node slides along it to the side's nearest
+    point in a few steps; with the full step's other component it comes only a constant share nearer each step
+    (a node of the neighbouring face, whose nearest point on this face's box lies on its border, can take up to
+    :data:`MAX_ITERATIONS` steps), or stops short of it (a parametrisation askew).  A node within the box's slack
+    of its border is left as it is: it settles there."""
+    lo, hi = box
+    out = (target < lo) | (target > hi)
+    for i in (0, 1):
+        rows = np.flatnonzero(out[:, 1 - i] & ~out[:, i])
+        if len(rows):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                along = uv[rows, i] - g[rows, i] / diagonal[i][rows]
+            target[rows, i] = np.where(np.isfinite(along), along, target[rows, i])
+    return target
 
 
 def _last_step_error(jet: tuple, step: np.ndarray, hessian: tuple, scale: np.ndarray

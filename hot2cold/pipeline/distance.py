@@ -3,7 +3,8 @@
 G1, G2 and the refinement for G1 replace fits by corrected ones (turned, bent, refined); a correction is taken
 only where it leaves the fit within reach of the field (its nodes' cold targets, eq. 21, and the field's
 estimate between them): :meth:`FieldDistance.moved_off` says why not where it does not.  The distances are
-cached per (face, surface, grid): G1 and G2 ask for a face's plain fit against every trial.
+cached per (face, surface's content, grid): G1 and G2 ask for a face's plain fit against every trial, and G1's
+refinement trials correct the faces away from the refined ones again into the same surfaces (other objects).
 """
 from __future__ import annotations
 
@@ -66,8 +67,8 @@ class FieldDistance:
     field: DisplacementField
     tolerance: float | None
     threads: int = 1
-    #: :meth:`distance` of each (face, surface, grid) asked for (keys hold the objects, so no id is reused while
-    #: the record lives; :meth:`on` shares them).
+    #: :meth:`distance` of each (face, surface's :meth:`~hot2cold.core.bspline.BSplineSurface.digest`, grid) asked
+    #: for (keys hold the grids, so no id is reused while the record lives; :meth:`on` shares them).
     _distances: dict = dataclass_field(default_factory=dict, repr=False)
     #: The parameters where :meth:`distance` found the distances of a fit a correction may replace (by the same
     #: keys), for :meth:`_bound`; only for those, since each holds a pair per node.
@@ -90,7 +91,7 @@ class FieldDistance:
         only where its distance at its hot parameters does not bound it below the largest
         (:func:`~hot2cold.core.footpoint.surface_distances_above`).  ``keep_feet``: the parameters where the
         distances were found (or bounded) are kept for :meth:`_bound`."""
-        key = (k, surface, grid)
+        key = (k, surface.digest(), grid)
         if key in self._distances and (not keep_feet or key in self._feet):
             return self._distances[key]
         targets, uv = self._targets(k, grid)
@@ -108,7 +109,7 @@ class FieldDistance:
         distance of each point from ``after`` at the parameters where it was found on ``before`` (a point on the
         surface is no nearer than its foot).  One evaluation per point instead of a projection; ``inf`` where
         ``before``'s parameters were not kept."""
-        feet = self._feet.get((k, before, grid))
+        feet = self._feet.get((k, before.digest(), grid))
         if feet is None or not len(feet):
             return np.inf if feet is None else 0.0
         targets, _ = self._targets(k, grid)
