@@ -113,6 +113,21 @@ def test_displacements_carried_to_the_feet_are_exact_for_an_affine_field():
     np.testing.assert_array_equal(on, feet @ A.T + B - feet)
 
 
+def test_remembered_estimates_are_the_estimates_and_asked_once(monkeypatch):
+    """The estimator's memo gives the numbers a call gives (to the bit), and asks the fits only for points it has
+    not seen (a face fitted again asks for the same artificial nodes)."""
+    pts = RNG.random((400, 3)) * 10
+    est = FieldEstimator(pts, 1e-3 * np.column_stack([pts[:, 0] ** 2, pts[:, 1] * pts[:, 2], np.sin(pts[:, 0])]), 20)
+    first, more = RNG.random((50, 3)) * 12, RNG.random((20, 3)) * 12
+    assert np.array_equal(est.remembered(first), est(first))
+    asked = []
+    real = FieldEstimator.__call__
+    monkeypatch.setattr(FieldEstimator, "__call__", lambda self, x, *a: asked.append(len(x)) or real(self, x, *a))
+    again = np.concatenate([more, first[::-1], more[:3]])
+    assert np.array_equal(est.remembered(again), real(est, again))
+    assert asked == [len(more) + 3]          # one call, for the points not seen before (three of them twice)
+
+
 def test_displacements_carried_together_are_those_carried_one_by_one():
     """Several sets of displacements carried in one call of the estimator, with its estimate at more points, give
     the numbers each gets on its own: an estimate at a point does not depend on the points asked with it."""

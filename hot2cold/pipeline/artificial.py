@@ -82,6 +82,7 @@ class FieldEstimator:
         order = np.random.default_rng(0).permutation(len(points))
         self._rank = np.empty(len(points), int)
         self._rank[order] = np.arange(len(points))
+        self._memo: dict[bytes, np.ndarray] = {}        # point (its bytes) -> estimate, for remembered()
         self._levels = [(np.arange(len(points)), self._tree)]
         size = len(points) // 2
         while size >= MAX_NEIGHBOURS:
@@ -152,6 +153,20 @@ class FieldEstimator:
             if len(flat):
                 out[start + flat] = self._spanning(xs[flat])
         return out
+
+    def remembered(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`__call__`'s estimates ``(m, 3)`` at ``x (m, 3)``, those at points asked before through this method
+        (equal to the bit) from a memo: a face's fit asks for the same points (its artificial nodes, its cells'
+        centres, its hot pcurves) each time the face is fitted again on edges moved elsewhere (G1's corners and
+        refinement trials).  The same numbers as a call (an estimate does not depend on the points asked with
+        it); the memo keeps every point asked, so it is for a fit's few points, not a grid's."""
+        x = np.ascontiguousarray(np.atleast_2d(np.asarray(x, float)))
+        keys = [row.tobytes() for row in x]
+        missing = np.array([i for i, key in enumerate(keys) if key not in self._memo], dtype=int)
+        if len(missing):
+            for i, estimate in zip(missing, self(x[missing])):
+                self._memo[keys[i]] = estimate
+        return np.array([self._memo[key] for key in keys]).reshape(x.shape)
 
     def left_out(self, rows: np.ndarray, chunk: int = 4096) -> np.ndarray:
         """Estimates ``(m, 3)`` at the foot points ``rows (m,)`` (indices into ``points``) from the others,
@@ -225,11 +240,13 @@ def carried(disp: np.ndarray, at: np.ndarray, to: np.ndarray, estimator: FieldEs
 
 
 def carried_together(carries: list[tuple[np.ndarray, np.ndarray, np.ndarray]], estimator: FieldEstimator,
-                     gap: float, also: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray | None]:
+                     gap: float, also: np.ndarray | None = None, remember: bool = False
+                     ) -> tuple[list[np.ndarray], np.ndarray | None]:
     """:func:`carried` of each ``(disp (m, 3), at (m, 3), to (m, 3))`` of ``carries``, and the estimate ``(k, 3)``
     at the points ``also (k, 3)`` (None: none), from one call of ``estimator`` for all of them: a call's cost is
     mostly its own where a face asks for a few points along each of its edges.  The same numbers as a call
-    each (the estimate at a point does not depend on the others asked with it)."""
+    each (the estimate at a point does not depend on the others asked with it).  ``remember``: through
+    :meth:`FieldEstimator.remembered`."""
     asked, apart = [], []
     for disp, at, to in carries:
         rows = np.linalg.norm(to - at, axis=1) > gap
@@ -237,7 +254,7 @@ def carried_together(carries: list[tuple[np.ndarray, np.ndarray, np.ndarray]], e
         asked += [to[rows], at[rows]]
     if also is not None:
         asked.append(also)
-    estimates = estimated(estimator, *asked)
+    estimates = estimated(estimator, *asked, remember=remember)
     out = []
     for j, ((disp, _, _), rows) in enumerate(zip(carries, apart)):
         if not rows.any():
@@ -249,13 +266,15 @@ def carried_together(carries: list[tuple[np.ndarray, np.ndarray, np.ndarray]], e
     return out, (estimates[-1] if also is not None else None)
 
 
-def estimated(estimator: FieldEstimator, *points: np.ndarray) -> list[np.ndarray]:
+def estimated(estimator: FieldEstimator, *points: np.ndarray, remember: bool = False) -> list[np.ndarray]:
     """``[estimator(p) for p in points]`` (each ``(m_i, 3)`` at ``(m_i, 3)``) from one call of ``estimator``: the
-    same numbers (an estimate at a point does not depend on the others asked with it), at a call's cost."""
+    same numbers (an estimate at a point does not depend on the others asked with it), at a call's cost.
+    ``remember``: through :meth:`FieldEstimator.remembered` (a fit's points, asked again when it is made again)."""
     sizes = [len(p) for p in points]
     if not sum(sizes):
         return [np.zeros((n, 3)) for n in sizes]
-    return np.split(estimator(np.concatenate(points)), np.cumsum(sizes)[:-1])
+    together = np.concatenate(points)
+    return np.split(estimator.remembered(together) if remember else estimator(together), np.cumsum(sizes)[:-1])
 
 
 def carry_to_feet(points: np.ndarray, feet: np.ndarray, displacements: np.ndarray, used: np.ndarray,

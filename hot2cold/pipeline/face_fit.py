@@ -186,7 +186,8 @@ def _field_prior(surface: BSplineSurface, free: np.ndarray, delta: np.ndarray,
     u, v = (a.ravel() for a in np.meshgrid(tu, tv, indexing="ij"))
     basis = surface_basis(surface, u, v)
     flat = delta.reshape(-1, 3)
-    at_cells, at_poles = estimated(estimator, evaluate_surface(surface, u, v), surface.poles.reshape(-1, 3)[free])
+    at_cells, at_poles = estimated(estimator, evaluate_surface(surface, u, v), surface.poles.reshape(-1, 3)[free],
+                                   remember=True)
     rhs = at_cells - basis[:, ~free] @ flat[~free]
     return solve_tsvd(basis[:, free], rhs, PRIOR_EPSILON, prior=at_poles).x
 
@@ -266,7 +267,7 @@ def face_problem(face: Face, part: Part, edge_morphs: list[EdgeMorph], inputs: F
     # from one call of the estimator
     target_rows, at_centres = carried_together(
         carries, estimator, GAP_SHARE * part.diagonal,
-        evaluate_surface(surface, centres[:, 0], centres[:, 1]) if len(centres) else None)
+        evaluate_surface(surface, centres[:, 0], centres[:, 1]) if len(centres) else None, remember=True)
     target = np.concatenate(target_rows + [field.displacements[nodes]])
     weight = np.ones(len(uv))
     if len(centres):
