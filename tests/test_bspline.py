@@ -200,8 +200,8 @@ def random_affine(rng):
 
 @pytest.mark.parametrize("rational", [False, True])
 def test_surface_digest_tells_content_not_objects(rational):
-    """Records equal to the bit give one digest, made apart or copied; any pole, knot or weight changed (even a
-    zero's sign, another bit pattern) gives another."""
+    """Records equal to the bit give one digest, made apart or copied; a pole or a knot moved to the next float,
+    a weight changed, or unit weights given to a non-rational record, another."""
     rng = np.random.default_rng(7 + rational)
     s = random_surface(rng, 3, 2, rational)
     copy = BSplineSurface(s.poles.copy(), s.u_knots.copy(), s.v_knots.copy(), s.u_degree, s.v_degree,
