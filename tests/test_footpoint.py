@@ -416,6 +416,41 @@ def test_raster_leaves_a_wide_margin_to_the_kernel_without_listing_it():
                   [Trim.INSIDE, Trim.OUTSIDE, Trim.INSIDE])
 
 
+def test_pcurve_points_are_the_kernels_for_every_kind_of_pcurve():
+    """``pcurve_points`` evaluates lines, circles and B-splines in numpy, and other pcurves (an ellipse) by the
+    kernel: every kind gives the kernel's points to rounding, on a part as built (lines, circles, an ellipse on
+    the slanted cut's plane) and on the same part converted to B-splines (B-spline pcurves, rational ones)."""
+    import cadquery as cq
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+    from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Ellipse, GeomAbs_Line
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from hot2cold.kernel.conversion import to_bspline
+    from hot2cold.kernel.project import pcurve_points
+    from hot2cold.kernel.sampling import face_list
+
+    made = cq.Workplane().box(20, 20, 10).faces(">Z").workplane().hole(6).val().wrapped
+    slant = cq.Workplane().cylinder(30, 4).val().rotate((0, 0, 0), (1, 0, 0), 30).wrapped
+    cut = BRepAlgoAPI_Common(slant, cq.Workplane().box(40, 40, 20).val().wrapped).Shape()
+    seen = set()
+    for shape in (made, cut, to_bspline(made), to_bspline(cut)):
+        for face in face_list(shape):
+            explorer = TopExp_Explorer(face, TopAbs_EDGE)
+            while explorer.More():
+                curve = BRepAdaptor_Curve2d(TopoDS.Edge_s(explorer.Current()), face)
+                t = np.linspace(curve.FirstParameter(), curve.LastParameter(), 57)
+                kernel = np.array([(q.X(), q.Y()) for q in map(curve.Value, t)])
+                got = pcurve_points(curve)(t)
+                assert got.shape == (57, 2)
+                np.testing.assert_allclose(got, kernel, rtol=0, atol=1e-12 * max(1.0, np.abs(kernel).max()))
+                seen.add(curve.GetType())
+                explorer.Next()
+    assert {GeomAbs_Line, GeomAbs_Circle, GeomAbs_Ellipse, GeomAbs_BSplineCurve} <= seen
+
+
 @pytest.mark.heavy
 def test_classify_matches_fclass2d(part):
     """``Projector.classify`` (raster + kernel at the boundary) equals ``BRepTopAdaptor_FClass2d`` point by

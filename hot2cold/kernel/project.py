@@ -21,13 +21,16 @@ from OCP.BRepAdaptor import BRepAdaptor_Curve2d
 from OCP.BRepTools import BRepTools
 from OCP.BRepTopAdaptor import BRepTopAdaptor_FClass2d
 from OCP.Extrema import Extrema_ExtAlgo_Grad
+from OCP.GeomAbs import GeomAbs_BSplineCurve, GeomAbs_Circle, GeomAbs_Line
 from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve, GeomAPI_ProjectPointOnSurf
 from OCP.gp import gp_Pnt, gp_Pnt2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS
 
+from ..core.bspline import BSplineCurve, evaluate_curve
 from ..core.domain import DomainRaster, Trim
+from .convert import flat_knots
 
 #: Fewest and most cells along each side of a face's domain raster.
 RASTER_CELLS = (64, 2048)
@@ -35,6 +38,38 @@ RASTER_CELLS = (64, 2048)
 #: as much as the kernel's classifying them one by one next to the boundary; a morph asks most faces many times
 #: about a few points each).
 RASTER_WORTH = 200
+
+
+def pcurve_points(curve: BRepAdaptor_Curve2d):
+    """``points(t)``: the pcurve ``curve`` at parameters ``t (m,)`` as ``(m, 2)``.  Lines, circles and non-periodic
+    B-splines are evaluated in numpy from their definition (the kernel's points to rounding: a line ``P + t D``, a
+    circle ``C + r (cos t X + sin t Y)``, a B-spline from its poles, knots and weights), other curves point by
+    point by the kernel (a Python call costs about as much as a few hundred points in numpy, and a face's raster
+    asks for thousands)."""
+    kind = curve.GetType()
+    if kind == GeomAbs_Line:
+        line = curve.Line()
+        at, along = line.Location(), line.Direction()
+        at, along = np.array([at.X(), at.Y()]), np.array([along.X(), along.Y()])
+        return lambda t: at + np.asarray(t, float)[:, None] * along
+    if kind == GeomAbs_Circle:
+        circle = curve.Circle()
+        axes = circle.Position()
+        centre, x, y = axes.Location(), axes.XDirection(), axes.YDirection()
+        centre, r = np.array([centre.X(), centre.Y()]), circle.Radius()
+        x, y = r * np.array([x.X(), x.Y()]), r * np.array([y.X(), y.Y()])
+        return lambda t: centre + np.cos(t)[:, None] * x + np.sin(t)[:, None] * y
+    if kind == GeomAbs_BSplineCurve and not curve.IsPeriodic():
+        spline = curve.BSpline()
+        n = spline.NbPoles()
+        poles = np.array([[q.X(), q.Y(), 0.0] for q in (spline.Pole(i) for i in range(1, n + 1))])
+        weights = np.array([spline.Weight(i) for i in range(1, n + 1)]) if spline.IsRational() else None
+        record = BSplineCurve(poles, flat_knots(spline.NbKnots(), spline.Knot, spline.Multiplicity),
+                              spline.Degree(), weights)
+        lo, hi = record.domain
+        if lo <= curve.FirstParameter() and curve.LastParameter() <= hi:     # else the kernel extends it
+            return lambda t: evaluate_curve(record, t)[:, :2]
+    return lambda t: np.array([(q.X(), q.Y()) for q in map(curve.Value, t)]).reshape(-1, 2)
 
 
 def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -45,17 +80,18 @@ def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarra
     explorer = TopExp_Explorer(face, TopAbs_EDGE)
     while explorer.More():
         curve = BRepAdaptor_Curve2d(TopoDS.Edge_s(explorer.Current()), face)
+        points = pcurve_points(curve)
         first, last = curve.FirstParameter(), curve.LastParameter()
         n = 17
         while True:
             t = np.linspace(first, last, n)
-            pts = np.array([(q.X(), q.Y()) for q in map(curve.Value, t)])
+            pts = points(t)
             longest = float(np.max(np.abs(np.diff(pts, axis=0)) / cell)) if n > 1 else 0.0
             if longest <= 1.0 or n > 200_000:
                 break
             n = int(n * min(8.0, longest + 1.0)) + 1
         lines.append(pts)
-        middles.append(np.array([(q.X(), q.Y()) for q in map(curve.Value, 0.5 * (t[:-1] + t[1:]))]).reshape(-1, 2))
+        middles.append(points(0.5 * (t[:-1] + t[1:])))
         explorer.Next()
     return lines, middles
 
