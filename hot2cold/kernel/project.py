@@ -72,24 +72,35 @@ def pcurve_points(curve: BRepAdaptor_Curve2d):
     return lambda t: np.array([(q.X(), q.Y()) for q in map(curve.Value, t)]).reshape(-1, 2)
 
 
+#: Points of a pcurve's polyline at the most (:func:`_pcurve_polylines`).
+POLYLINE_MOST = 200_000
+
+
 def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Every edge use's pcurve on ``face`` as a polyline ``(m, 2)`` whose segments are at most a raster cell
-    long (``cells`` cells across ``box``), and the pcurve at each segment's middle parameter ``(m - 1, 2)``."""
+    long (``cells`` cells across ``box``), and the pcurve at each segment's middle parameter ``(m - 1, 2)``.
+
+    From 16 segments of equal parameter, each segment longer than a cell is cut into as many of equal parameter
+    as it is cells long, until none is longer (or the polyline has ``POLYLINE_MOST`` points): a pcurve that runs
+    slowly over most of its parameters and crosses the face in a short stretch (next to a pole of its surface)
+    gets its points where it moves, not everywhere."""
     cell = np.array([(box[1] - box[0]) / cells, (box[3] - box[2]) / cells])
     lines, middles = [], []
     explorer = TopExp_Explorer(face, TopAbs_EDGE)
     while explorer.More():
         curve = BRepAdaptor_Curve2d(TopoDS.Edge_s(explorer.Current()), face)
         points = pcurve_points(curve)
-        first, last = curve.FirstParameter(), curve.LastParameter()
-        n = 17
-        while True:
-            t = np.linspace(first, last, n)
-            pts = points(t)
-            longest = float(np.max(np.abs(np.diff(pts, axis=0)) / cell)) if n > 1 else 0.0
-            if longest <= 1.0 or n > 200_000:
+        t = np.linspace(curve.FirstParameter(), curve.LastParameter(), 17)
+        pts = points(t)
+        while len(t) < POLYLINE_MOST:
+            pieces = np.ceil(np.max(np.abs(np.diff(pts, axis=0)) / cell, axis=1))      # cells each segment spans
+            pieces = np.where(np.isfinite(pieces), np.maximum(pieces, 1.0), 1.0).astype(int)
+            if np.all(pieces == 1):
                 break
-            n = int(n * min(8.0, longest + 1.0)) + 1
+            segment = np.repeat(np.arange(len(pieces)), pieces)
+            share = (np.arange(len(segment)) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / pieces[segment]
+            t = np.concatenate([t[segment] + share * (t[segment + 1] - t[segment]), t[-1:]])
+            pts = points(t)
         lines.append(pts)
         middles.append(points(0.5 * (t[:-1] + t[1:])))
         explorer.Next()
