@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from hot2cold.core.bspline import (BSplineSurface, bend_parameters, evaluate_surface, grid_jet, grid_points,
-                                   normal_turn, surface_jet)
+                                   normal_turn, surface_jet, tangent_noise)
 
 
 def _knots(rng, n: int, p: int, lo: float, hi: float) -> np.ndarray:
@@ -60,6 +60,34 @@ def test_normal_turns_as_fast_as_the_curvature():
     around, along = normal_turn(s_u, s_v, s_uu, s_uv, s_vv)
     np.testing.assert_allclose(around, 20.0, rtol=1e-9)
     np.testing.assert_allclose(along, 0.0, atol=1e-9)
+
+
+def _sphere_eighth(radius: float) -> BSplineSurface:
+    """An eighth of a sphere of ``radius``: a rational quarter arc from the equator to the pole in u (degree 2),
+    revolved by 90 degrees about z in v (degree 2); the side u = 1 is collapsed into the pole."""
+    s = np.sqrt(0.5)
+    profile = radius * np.array([[1, 0, 0], [1, 0, 1], [0, 0, 1]], float)
+    poles = np.array([[[x, 0, z], [x, x, z], [0, x, z]] for x, _, z in profile])
+    weights = np.outer([1, s, 1], [1, s, 1])
+    return BSplineSurface(poles, [0, 0, 0, 1, 1, 1], [0, 0, 0, 1, 1, 1], 2, 2, weights)
+
+
+def test_normal_turn_is_undefined_at_a_pole_and_a_pole_makes_no_dense_grid():
+    """On an eighth of a sphere of radius 5 mm the normal turns by 1/R = 0.2 rad/mm wherever it is defined; at the
+    pole the tangent along the collapsed side is rounding (its rate any size), so the turn is NaN there, and the
+    start grid at 1 mm spacing has about the sphere's arc length over the spacing in each direction, not the
+    most it may have (2000 in each: the rounding's turn rates asked for them all)."""
+    surface = _sphere_eighth(5.0)
+    u, v = np.linspace(0, 1, 9), np.linspace(0, 1, 7)
+    _, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, u, v)
+    noise = (tangent_noise(surface, 0, u)[:, None], tangent_noise(surface, 1, v)[None, :])
+    along_u, along_v = normal_turn(s_u, s_v, s_uu, s_uv, s_vv, noise)
+    assert np.all(np.isnan(along_u[-1])) and np.all(np.isnan(along_v[-1]))        # the pole
+    np.testing.assert_allclose(along_u[:-1], 0.2, rtol=1e-9)
+    np.testing.assert_allclose(along_v[:-1], 0.2, rtol=1e-9)
+    gu, gv = bend_parameters(surface, surface.domain, 1.0)
+    quarter = 0.5 * np.pi * 5.0                                                  # 7.85 mm
+    assert quarter <= len(gu) - 1 <= 3 * quarter and quarter <= len(gv) - 1 <= 3 * quarter
 
 
 def _hairpin(leg: float, half: float, height: float) -> BSplineSurface:

@@ -1023,26 +1023,41 @@ def grid_jet(surface: BSplineSurface, u, v) -> tuple[np.ndarray, ...]:
 
 
 def normal_turn(s_u: np.ndarray, s_v: np.ndarray, s_uu: np.ndarray, s_uv: np.ndarray,
-                s_vv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                s_vv: np.ndarray, noise: tuple = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """How fast the unit normal turns along u and along v, in radians per mm of the parameter line (1/mm):
     ``|n_u| / |S_u|`` and ``|n_v| / |S_v|``, each (...), from the first and second derivatives, each
     (..., 3).  On a sphere of radius R both are 1/R; along a straight line of a cylinder, 0.  NaN where the
-    normal or a tangent is undefined (a collapsed boundary).
+    normal or a tangent is undefined: a tangent no longer than its rounding ``noise`` (``(noise_u, noise_v)``,
+    mm per parameter unit, each broadcast against (...); :func:`tangent_noise`), as at a collapsed side or a
+    pole, whose derivatives are rounding and whose rates would be any size, or tangents parallel to
+    :data:`NORMAL_RTOL`.
 
     With ``N = S_u x S_v`` and ``n = N / |N|``: ``n_u = (N_u - (n . N_u) n) / |N|``, ``N_u = S_uu x S_v + S_u x
     S_uv`` (and ``N_v = S_uv x S_v + S_u x S_vv``).
     """
     big_n = cross(s_u, s_v)
     size = np.linalg.norm(big_n, axis=-1, keepdims=True)
+    length_u, length_v = np.linalg.norm(s_u, axis=-1), np.linalg.norm(s_v, axis=-1)
+    defined = (length_u > noise[0]) & (length_v > noise[1]) & (size[..., 0] > NORMAL_RTOL * length_u * length_v)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = big_n / size
         rates = []
-        for d, tangent in ((cross(s_uu, s_v) + cross(s_u, s_uv), s_u),
-                           (cross(s_uv, s_v) + cross(s_u, s_vv), s_v)):
+        for d, length in ((cross(s_uu, s_v) + cross(s_u, s_uv), length_u),
+                          (cross(s_uv, s_v) + cross(s_u, s_vv), length_v)):
             turn = d - np.sum(n * d, axis=-1, keepdims=True) * n
-            rate = np.linalg.norm(turn, axis=-1) / (size[..., 0] * np.linalg.norm(tangent, axis=-1))
-            rates.append(np.where(np.isfinite(rate), rate, np.nan))
+            rate = np.linalg.norm(turn, axis=-1) / (size[..., 0] * length)
+            rates.append(np.where(np.isfinite(rate) & defined, rate, np.nan))
     return rates[0], rates[1]
+
+
+def tangent_noise(surface: BSplineSurface, axis: int, t: np.ndarray) -> np.ndarray:
+    """The rounding ``(m,)`` (mm per parameter unit) of the first derivative along ``axis`` (0: u, 1: v) at the
+    parameters ``t (m,)`` of that direction, as :func:`surface_normals` takes it: ``NORMAL_RTOL * sum_i |dB_i| *
+    max |pole|`` with the (non-rational) basis of that direction; a tangent no longer is a collapsed one."""
+    knots, degree = (surface.u_knots, surface.u_degree) if axis == 0 else (surface.v_knots, surface.v_degree)
+    lo, hi = surface.domain[2 * axis:2 * axis + 2]
+    rows = _span_rows(_parameters(t, lo, hi, "uv"[axis]), knots, degree, 1, surface.layouts[axis])[1][1]
+    return NORMAL_RTOL * float(np.abs(surface.poles).max()) * np.abs(rows).sum(axis=1)
 
 
 #: Most points of the jet :func:`bend_parameters` evaluates at once (a block of v lines at a time): 2^18 points
@@ -1089,14 +1104,16 @@ def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 20
         edges = span_cells(breaks, degree)[3]                  # (cells + 1,)
         ends.append(np.append(np.column_stack([edges[:-1], 0.5 * (edges[:-1] + edges[1:])]).ravel(), edges[-1]))
     need = [np.zeros(len(e) - 1) for e in ends]
+    noise_u, noise_v = tangent_noise(surface, 0, ends[0])[:, None], tangent_noise(surface, 1, ends[1])[None, :]
     block = max(1, BEND_BLOCK // len(ends[0]) - 1)            # v pieces per block
     for k0 in range(0, len(ends[1]) - 1, block):
         k1 = min(k0 + block, len(ends[1]) - 1)
         s, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, ends[0], ends[1][k0:k1 + 1])    # (pieces_u + 1, ., 3)
-        rate_u, rate_v = normal_turn(s_u, s_v, s_uu, s_uv, s_vv)
+        rate_u, rate_v = normal_turn(s_u, s_v, s_uu, s_uv, s_vv, (noise_u, noise_v[:, k0:k1 + 1]))
         with np.errstate(invalid="ignore", divide="ignore"):
             normal = cross(s_u, s_v)
             normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+        normal[np.isnan(rate_u)] = np.nan            # no normal where the turn is undefined (a pole): no angle
         need[0] = np.maximum(need[0], _piece_steps(s, rate_u, normal, spacing))
         need[1][k0:k1] = _piece_steps(*(np.swapaxes(a, 0, 1) for a in (s, rate_v, normal)), spacing)
     out = []
