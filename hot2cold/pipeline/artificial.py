@@ -133,11 +133,17 @@ class FieldEstimator:
         for start in range(0, len(x), chunk):
             xs = x[start:start + chunk]
             dist, idx = self._tree.query(xs, k=self._k)
-            every = np.ones(idx.shape, bool)
-            linear, correction, trust, flat = fits_at(self._points[idx], self._disp[idx], every, xs,
-                                                      self._quadratic, OFF_SPAN)
-            quadratic = linear + correction
+            # the fit over the k nearest, where the wide fits below do not take its place: a point far out
+            # (an artificial node over a face's trimmed-away part) has both its fits from the wide balls
             far = np.nonzero(LINEAR_REACH * dist[:, 0] > dist[:, -1])[0]
+            near = np.setdiff1d(np.arange(len(xs)), far, assume_unique=True)
+            linear, correction = np.zeros((len(xs), 3)), np.zeros((len(xs), 3))
+            trust, flat = np.zeros(len(xs)), np.zeros(len(xs), bool)
+            if len(near):
+                linear[near], correction[near], trust[near], flat[near] = fits_at(
+                    self._points[idx[near]], self._disp[idx[near]], np.ones((len(near), self._k), bool), xs[near],
+                    self._quadratic, OFF_SPAN)
+            quadratic = linear + correction
             if len(far):
                 wide, valid = self._wide(xs[far], LINEAR_REACH * dist[far, 0])
                 fit = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False, OFF_SPAN)
