@@ -128,6 +128,27 @@ def test_remembered_estimates_are_the_estimates_and_asked_once(monkeypatch):
     assert asked == [len(more) + 3]          # one call, for the points not seen before (three of them twice)
 
 
+def test_a_point_far_out_is_fitted_over_the_wide_balls_only(monkeypatch):
+    """A point far from the foot points (an artificial node over a trimmed-away part) takes its linear and its
+    quadratic fit from the wide balls, so it is not fitted over its ``k`` nearest as well: asked together with
+    points among the foot points, the fit over the ``k`` nearest sees only those; the estimates are a call's
+    for each point alone (to the bit)."""
+    import hot2cold.pipeline.artificial as artificial
+
+    pts = RNG.random((400, 3)) * 10
+    est = FieldEstimator(pts, 1e-3 * np.column_stack([pts[:, 0] ** 2, pts[:, 1] * pts[:, 2], np.sin(pts[:, 0])]), 20)
+    among, far = RNG.random((30, 3)) * 10, RNG.random((12, 3)) * 10 + [40.0, 0.0, 0.0]
+    x = np.concatenate([among, far])
+    alone = np.array([est(p[None])[0] for p in x])
+    widths = []
+    real = artificial.fits_at
+    monkeypatch.setattr(artificial, "fits_at", lambda points, *a, **k: widths.append(points.shape[:2]) or
+                        real(points, *a, **k))
+    assert np.array_equal(est(x), alone)
+    assert (len(among), 20) in widths                                  # the k nearest: only the points among them
+    assert not any(width == 20 and count > len(among) for count, width in widths)
+
+
 def test_displacements_carried_together_are_those_carried_one_by_one():
     """Several sets of displacements carried in one call of the estimator, with its estimate at more points, give
     the numbers each gets on its own: an estimate at a point does not depend on the points asked with it."""
