@@ -26,6 +26,8 @@ polynomials over foot points around it instead:
 """
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from ..core.localfit import fits_at
@@ -112,11 +114,17 @@ class FieldEstimator:
         for level in np.unique(chosen):
             keep, tree = self._levels[level]
             rows = np.flatnonzero(chosen == level)
-            for row, ball in zip(rows, tree.query_ball_point(x[rows], radius[rows])):
-                ball = keep[np.asarray(ball, int)]
-                ball = ball[np.argsort(self._rank[ball])[:MAX_NEIGHBOURS]]
-                idx[row, :len(ball)] = ball
-                valid[row, :len(ball)] = True
+            balls = tree.query_ball_point(x[rows], radius[rows])
+            sizes = np.fromiter(map(len, balls), np.int64, count=len(balls))
+            found = keep[np.fromiter(itertools.chain.from_iterable(balls), np.int64, count=int(sizes.sum()))]
+            # each ball's foot points in the random order (their rank), the first MAX_NEIGHBOURS of it kept
+            owner = np.repeat(np.arange(len(rows)), sizes)
+            order = np.argsort(owner * len(self._points) + self._rank[found])
+            found = found[order]
+            place = np.arange(len(found)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+            take = place < MAX_NEIGHBOURS
+            idx[rows[owner[take]], place[take]] = found[take]
+            valid[rows[owner[take]], place[take]] = True
         return idx, valid
 
     def __call__(self, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
