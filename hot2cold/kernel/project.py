@@ -44,8 +44,7 @@ def pcurve_points(curve: BRepAdaptor_Curve2d):
     """``points(t)``: the pcurve ``curve`` at parameters ``t (m,)`` as ``(m, 2)``.  Lines, circles and non-periodic
     B-splines are evaluated in numpy from their definition (the kernel's points to rounding: a line ``P + t D``, a
     circle ``C + r (cos t X + sin t Y)``, a B-spline from its poles, knots and weights), other curves point by
-    point by the kernel (a Python call costs about as much as a few hundred points in numpy, and a face's raster
-    asks for thousands)."""
+    point by the kernel (a Python call per point, where a face's raster asks for thousands)."""
     kind = curve.GetType()
     if kind == GeomAbs_Line:
         line = curve.Line()
