@@ -76,7 +76,7 @@ def test_normal_turn_is_undefined_at_a_pole_and_a_pole_makes_no_dense_grid():
     """On an eighth of a sphere of radius 5 mm the normal turns by 1/R = 0.2 rad/mm wherever it is defined; at the
     pole the tangent along the collapsed side is rounding (its rate any size), so the turn is NaN there, and the
     start grid at 1 mm spacing has about the sphere's arc length over the spacing in each direction, not the
-    most it may have (2000 in each: the rounding's turn rates asked for them all)."""
+    most it may have (the rounding's turn rates at the pole asked for all 2000 along the collapsed side)."""
     surface = _sphere_eighth(5.0)
     u, v = np.linspace(0, 1, 9), np.linspace(0, 1, 7)
     _, s_u, s_v, s_uu, s_uv, s_vv = grid_jet(surface, u, v)
