@@ -81,8 +81,8 @@ def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarra
 
     From 16 segments of equal parameter, each segment longer than a cell is cut into as many of equal parameter
     as it is cells long, until none is longer (or the polyline has ``POLYLINE_MOST`` points): a pcurve that runs
-    slowly over most of its parameters and crosses the face in a short stretch (next to a pole of its surface)
-    gets its points where it moves, not everywhere."""
+    slowly over most of its parameters and crosses the face in a short stretch (a parametrisation far from
+    its arc length) gets its points where it moves, not everywhere."""
     cell = np.array([(box[1] - box[0]) / cells, (box[3] - box[2]) / cells])
     lines, middles = [], []
     explorer = TopExp_Explorer(face, TopAbs_EDGE)
