@@ -1121,9 +1121,16 @@ def bend_parameters(surface: BSplineSurface, box, spacing: float, most: int = 20
         count = np.clip(np.ceil(wanted * (1.0 - 1e-9)), 1, most)                        # (pieces,)
         if count.sum() > most:
             count = np.maximum(1, np.ceil(count * most / count.sum()))
-        count = count.astype(np.int64)
-        piece = np.repeat(np.arange(len(count)), count)
-        within = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        t = e[piece] + within / count[piece] * (e[piece + 1] - e[piece])
-        out.append(np.append(t, e[-1]))
+        out.append(cut_intervals(e, count.astype(np.int64)))
     return out[0], out[1]
+
+
+def cut_intervals(points: np.ndarray, pieces: np.ndarray) -> np.ndarray:
+    """``points (n,)`` or ``(n, d)`` with the interval between each pair of neighbours cut into ``pieces (n - 1,)``
+    (ints, at least 1) equal parts: ``(sum(pieces) + 1,)`` or ``(sum(pieces) + 1, d)``, the given points among them
+    in their order."""
+    piece = np.repeat(np.arange(len(pieces)), pieces)
+    share = (np.arange(len(piece)) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / pieces[piece]
+    if points.ndim > 1:
+        share = share[:, None]
+    return np.concatenate([points[piece] + share * (points[piece + 1] - points[piece]), points[-1:]])

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
+from OCP.Geom2d import Geom2d_BSplineCurve
 from OCP.gp import gp_Pnt, gp_Trsf
 from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array2OfPnt
 from OCP.TColStd import (TColStd_Array1OfInteger, TColStd_Array1OfReal,
@@ -38,7 +39,7 @@ def unapply_trsf(points: np.ndarray, trsf: gp_Trsf | None) -> np.ndarray:
     return np.linalg.solve(a, (points - b).reshape(-1, 3).T).T.reshape(points.shape)
 
 
-def flat_knots(n: int, knot, multiplicity) -> np.ndarray:
+def _flat_knots(n: int, knot, multiplicity) -> np.ndarray:
     """The full knot vector from the ``n`` distinct knots ``knot(i)`` and their ``multiplicity(i)`` (1-based: the
     kernel's accessors, which every OCP build has, where its arrays' ``Value`` is missing from some)."""
     return np.repeat([knot(i) for i in range(1, n + 1)], [multiplicity(i) for i in range(1, n + 1)])
@@ -67,8 +68,19 @@ def curve_to_record(curve: Geom_BSplineCurve, trsf: gp_Trsf | None = None) -> BS
     n = curve.NbPoles()
     poles = np.array([[curve.Pole(i).X(), curve.Pole(i).Y(), curve.Pole(i).Z()] for i in range(1, n + 1)])
     weights = np.array([curve.Weight(i) for i in range(1, n + 1)]) if curve.IsRational() else None
-    knots = flat_knots(curve.NbKnots(), curve.Knot, curve.Multiplicity)
+    knots = _flat_knots(curve.NbKnots(), curve.Knot, curve.Multiplicity)
     return BSplineCurve(apply_trsf(poles, trsf), knots, curve.Degree(), weights)
+
+
+def curve2d_to_record(curve: Geom2d_BSplineCurve) -> BSplineCurve:
+    """A non-periodic ``Geom2d_BSplineCurve`` (a pcurve, in a face's parameters) as a :class:`BSplineCurve` whose
+    poles are ``(u, v, 0)``."""
+    if curve.IsPeriodic():
+        raise KernelError("periodic curves must be made non-periodic before conversion")
+    n = curve.NbPoles()
+    poles = np.array([[q.X(), q.Y(), 0.0] for q in (curve.Pole(i) for i in range(1, n + 1))])
+    weights = np.array([curve.Weight(i) for i in range(1, n + 1)]) if curve.IsRational() else None
+    return BSplineCurve(poles, _flat_knots(curve.NbKnots(), curve.Knot, curve.Multiplicity), curve.Degree(), weights)
 
 
 def surface_to_record(surface: Geom_BSplineSurface, trsf: gp_Trsf | None = None) -> BSplineSurface:
@@ -84,8 +96,8 @@ def surface_to_record(surface: Geom_BSplineSurface, trsf: gp_Trsf | None = None)
             poles[i, j] = p.X(), p.Y(), p.Z()
             weights[i, j] = surface.Weight(i + 1, j + 1)
     rational = surface.IsURational() or surface.IsVRational()
-    u_knots = flat_knots(surface.NbUKnots(), surface.UKnot, surface.UMultiplicity)
-    v_knots = flat_knots(surface.NbVKnots(), surface.VKnot, surface.VMultiplicity)
+    u_knots = _flat_knots(surface.NbUKnots(), surface.UKnot, surface.UMultiplicity)
+    v_knots = _flat_knots(surface.NbVKnots(), surface.VKnot, surface.VMultiplicity)
     return BSplineSurface(apply_trsf(poles, trsf), u_knots, v_knots, surface.UDegree(), surface.VDegree(),
                           weights if rational else None)
 

@@ -28,9 +28,9 @@ from OCP.TopAbs import TopAbs_EDGE, TopAbs_IN, TopAbs_ON
 from OCP.TopExp import TopExp_Explorer
 from OCP.TopoDS import TopoDS
 
-from ..core.bspline import BSplineCurve, evaluate_curve
+from ..core.bspline import cut_intervals, evaluate_curve
 from ..core.domain import DomainRaster, Trim
-from .convert import flat_knots
+from .convert import curve2d_to_record
 
 #: Fewest and most cells along each side of a face's domain raster.
 RASTER_CELLS = (64, 2048)
@@ -59,12 +59,7 @@ def pcurve_points(curve: BRepAdaptor_Curve2d):
         x, y = r * np.array([x.X(), x.Y()]), r * np.array([y.X(), y.Y()])
         return lambda t: centre + np.cos(t)[:, None] * x + np.sin(t)[:, None] * y
     if kind == GeomAbs_BSplineCurve and not curve.IsPeriodic():
-        spline = curve.BSpline()
-        n = spline.NbPoles()
-        poles = np.array([[q.X(), q.Y(), 0.0] for q in (spline.Pole(i) for i in range(1, n + 1))])
-        weights = np.array([spline.Weight(i) for i in range(1, n + 1)]) if spline.IsRational() else None
-        record = BSplineCurve(poles, flat_knots(spline.NbKnots(), spline.Knot, spline.Multiplicity),
-                              spline.Degree(), weights)
+        record = curve2d_to_record(curve.BSpline())
         lo, hi = record.domain
         if lo <= curve.FirstParameter() and curve.LastParameter() <= hi:     # else the kernel extends it
             return lambda t: evaluate_curve(record, t)[:, :2]
@@ -96,9 +91,7 @@ def _pcurve_polylines(face, box: np.ndarray, cells: int) -> tuple[list[np.ndarra
             pieces = np.where(np.isfinite(pieces), np.maximum(pieces, 1.0), 1.0).astype(int)
             if np.all(pieces == 1):
                 break
-            segment = np.repeat(np.arange(len(pieces)), pieces)
-            share = (np.arange(len(segment)) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / pieces[segment]
-            t = np.concatenate([t[segment] + share * (t[segment + 1] - t[segment]), t[-1:]])
+            t = cut_intervals(t, pieces)
             pts = points(t)
         lines.append(pts)
         middles.append(points(0.5 * (t[:-1] + t[1:])))

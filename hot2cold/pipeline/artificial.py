@@ -143,8 +143,8 @@ class FieldEstimator:
             dist, idx = self._tree.query(xs, k=self._k)
             # the fit over the k nearest, where the wide fits below do not take its place: a point far out
             # (an artificial node over a face's trimmed-away part) has both its fits from the wide balls
-            far = np.nonzero(LINEAR_REACH * dist[:, 0] > dist[:, -1])[0]
-            near = np.setdiff1d(np.arange(len(xs)), far, assume_unique=True)
+            wide_linear = LINEAR_REACH * dist[:, 0] > dist[:, -1]
+            far, near = np.flatnonzero(wide_linear), np.flatnonzero(~wide_linear)
             linear, correction = np.zeros((len(xs), 3)), np.zeros((len(xs), 3))
             trust, flat = np.zeros(len(xs)), np.zeros(len(xs), bool)
             if len(near):

@@ -29,8 +29,8 @@ from scipy.spatial import cKDTree
 
 from ..core.threads import map_threads
 from ..core.trees import kd_tree, query
-from ..core.bspline import (bend_parameters, evaluate_curve, evaluate_surface, grid_points, polyline_length,
-                            surface_normals)
+from ..core.bspline import (bend_parameters, cut_intervals, evaluate_curve, evaluate_surface, grid_points,
+                            polyline_length, surface_normals)
 from ..io.field import DisplacementField
 from ..core.footpoint import FootPoints, project_to_curve, project_to_surface
 from ..core.domain import Trim
@@ -156,9 +156,7 @@ def _dense(uv: np.ndarray, spacing: float, face) -> np.ndarray:
     on the surface."""
     pts = evaluate_surface(face.surface, *np.clip(uv, face.surface.domain[::2], face.surface.domain[1::2]).T)
     steps = np.maximum(1, np.ceil(np.linalg.norm(np.diff(pts, axis=0), axis=1) / spacing)).astype(int)
-    t = np.concatenate([np.arange(k) / k for k in steps])
-    seg = np.repeat(np.arange(len(steps)), steps)
-    return np.concatenate([uv[seg] + t[:, None] * (uv[seg + 1] - uv[seg]), uv[-1:]])
+    return cut_intervals(uv, steps)
 
 
 def curve_length(curve) -> float:
