@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .arrays import runs
 from .bspline import BSplineCurve, BSplineSurface
 
 
@@ -204,14 +205,6 @@ class Role(IntEnum):
     FACE = 0
     EDGE = 1
     VERTEX = 2
-
-
-def runs(values: np.ndarray) -> list[tuple[int, slice]]:
-    """``(value, slice)`` of each run of equal values of the sorted ``values (c,)``, in order."""
-    cuts = np.flatnonzero(np.diff(values)) + 1
-    starts = np.concatenate([[0], cuts])
-    ends = np.concatenate([cuts, [len(values)]])
-    return [(int(values[a]), slice(a, b)) for a, b in zip(starts, ends) if b > a]
 
 
 @dataclass(frozen=True, eq=False)

@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..errors import FieldError
 from ..io.atomic import write_atomically
 from ..io.field import DisplacementField, match_points
@@ -122,12 +123,12 @@ def _constraints(fixed_nodes, n_nodes: int) -> dict[tuple[int, ...], np.ndarray]
         for axis, nodes in fixed_nodes.items():
             if axis not in (0, 1, 2):
                 raise ValueError(f"fixed_nodes keys must be axes 0 (x), 1 (y), 2 (z), got {axis!r}")
-            groups[int(axis)] = np.unique(np.asarray(nodes, dtype=np.int64).reshape(-1))
+            groups[int(axis)] = distinct(np.asarray(nodes, dtype=np.int64))
         out = {}
         for axis, nodes in sorted(groups.items()):
             out[(axis,)] = nodes
     else:
-        out = {(0, 1, 2): np.unique(np.asarray(fixed_nodes, dtype=np.int64).reshape(-1))}
+        out = {(0, 1, 2): distinct(np.asarray(fixed_nodes, dtype=np.int64))}
     for nodes in out.values():
         if len(nodes) and (nodes[0] < 0 or nodes[-1] >= n_nodes):
             raise ValueError(f"fixed node indices must lie in 0..{n_nodes - 1}")
@@ -194,7 +195,7 @@ def write_deck(mesh: TetMesh, path, *, material: Material = TI6AL4V, fixed_nodes
     point, direction = _axis(axis_point, axis_direction)
     groups = _constraints(fixed_nodes, n)
     ids = np.asarray(mesh.node_tags, dtype=np.int64)
-    if len(np.unique(ids)) != n or ids.min() < 1:
+    if len(distinct(ids)) != n or ids.min() < 1:
         raise ValueError("mesh.node_tags must be distinct positive numbers (CalculiX node numbers)")
 
     if mesh.tets.shape[1] == 10:
@@ -521,7 +522,7 @@ def hot_to_cold_field(step_path, out_path=None, *, mesh: MeshOptions = MeshOptio
         faces = (hub_faces(tets, point, direction) if load.fixed_faces is None
                  else [int(f) for f in load.fixed_faces])
         try:
-            fixed_nodes = np.unique(np.concatenate([tets.face_nodes(f) for f in faces]))
+            fixed_nodes = distinct(np.concatenate([tets.face_nodes(f) for f in faces]))
         except IndexError as exc:
             raise ValueError(f"fixed_faces: {exc}") from None
         log.info("fixing face(s) %s: %d nodes", faces, len(fixed_nodes))

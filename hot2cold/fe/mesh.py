@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..errors import Hot2ColdError, StepReadError
 from ..io.inputs import check_input_file
 
@@ -97,7 +98,7 @@ class TetMesh:
                 else np.array(self.node_tags, dtype=np.int64, copy=True))
         if tags.shape != (len(nodes),):
             raise ValueError(f"node_tags must have shape ({len(nodes)},), got {tags.shape}")
-        surfaces = {int(k): np.unique(np.asarray(v, dtype=np.int64)) for k, v in self.surface_nodes.items()}
+        surfaces = {int(k): distinct(np.asarray(v, dtype=np.int64)) for k, v in self.surface_nodes.items()}
         for arr in itertools.chain((nodes, tets, tags), surfaces.values()):
             arr.flags.writeable = False
         object.__setattr__(self, "nodes", nodes)
@@ -121,7 +122,7 @@ class TetMesh:
         """Sorted indices ``(k,)`` of all nodes on the boundary surfaces."""
         if not self.surface_nodes:
             return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate(list(self.surface_nodes.values())))
+        return distinct(np.concatenate(list(self.surface_nodes.values())))
 
     def __repr__(self) -> str:
         return (f"TetMesh({len(self.nodes)} nodes, {len(self.tets)} tetrahedra of order {self.order}, "
@@ -438,7 +439,7 @@ def _extract(gmsh, etype: int, nper: int, source: str) -> TetMesh:
     enodes = np.asarray(enodes, dtype=np.int64).reshape(-1, nper)
     if len(enodes) == 0:
         raise SolverError(f"gmsh produced no tetrahedra for {source}")
-    used = np.unique(enodes)
+    used = distinct(enodes)
     order = np.argsort(tags)
     tags, coords = tags[order], coords[order]
     pos = np.searchsorted(tags, used)
@@ -449,7 +450,7 @@ def _extract(gmsh, etype: int, nper: int, source: str) -> TetMesh:
     surfaces = {}
     for _, s in gmsh.model.getEntities(2):
         stags, _, _ = gmsh.model.mesh.getNodes(2, s, includeBoundary=True)
-        stags = np.unique(np.asarray(stags, dtype=np.int64))
+        stags = distinct(np.asarray(stags, dtype=np.int64))
         k = np.searchsorted(node_tags, stags)
         ok = (k < len(node_tags)) & (node_tags[np.minimum(k, len(node_tags) - 1)] == stags)
         surfaces[int(s)] = k[ok]

@@ -63,6 +63,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..errors import FieldError, one_line
 from .inputs import check_input_file
 
@@ -390,7 +391,7 @@ def _triangles(rst, node_ids: np.ndarray, path: str) -> np.ndarray | None:
     lost = np.zeros(len(celltypes), bool)
     if elems is not None and len(elems) == len(celltypes):
         lost = np.array([np.any(np.asarray(e[10:]) == 0) for e in elems], bool)
-    others = sorted(set(np.unique(celltypes).tolist()) - set(_SOLIDS))
+    others = sorted(set(distinct(celltypes).tolist()) - set(_SOLIDS))
     if others:
         log.info("%s: %d non-solid element(s) (VTK cell types %s: shells, beams, contact, ...) give no boundary "
                  "triangles", path, int(np.isin(celltypes, others).sum()), ", ".join(map(str, others)))

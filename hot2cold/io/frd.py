@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..errors import FieldError
 from .cells import element_triangles
 from .inputs import read_input_bytes
@@ -424,7 +425,7 @@ class FrdFile:
             skipped: dict[int, int] = {}
             for block in self._element_blocks:
                 types, first, numbers = _parse_elements(self._lines, block, self.path)
-                for t in np.unique(types).tolist():
+                for t in distinct(types).tolist():
                     sel = types == t
                     if t not in ELEMENT_TYPES:
                         skipped[t] = skipped.get(t, 0) + int(sel.sum())
@@ -564,7 +565,7 @@ class FrdFile:
         if len(ids) == 0:
             raise FieldError(
                 f"results file {path}: the {block.name} block on line {block.header + 1} holds no node")
-        if len(np.unique(ids)) != len(ids):
+        if len(distinct(ids)) != len(ids):
             raise FieldError(f"results file {path}: a node appears twice in the {block.name} block on line "
                              f"{block.header + 1}")
         sorted_ids, sorted_xyz, node_block = self._node_coords(before[-1])

@@ -67,6 +67,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..errors import FieldError
 from .inputs import check_input_file, read_input_bytes
 
@@ -506,14 +507,14 @@ def _positions_and_vectors(geo: _Geometry, chosen: _Set, path: str) -> tuple[np.
     """Basic-frame positions (N, 3) and displacements (N, 3) of the chosen set's grids."""
     g = geo.grids[_grid_rows(geo, chosen.ids, path)]
     points = np.array(g["x"], dtype=np.float64)
-    for cp in np.unique(g["cp"]):
+    for cp in distinct(g["cp"]):
         sel = g["cp"] == cp
         _check_system(geo.cords, geo.other_cords, int(cp), path, int(g["id"][sel][0]))
         points[sel] = _to_basic(geo.cords, int(cp), points[sel], path, int(g["id"][sel][0]))
     vectors = chosen.values.copy()
     if chosen.basic:
         return points, vectors
-    for cd in np.unique(g["cd"]):
+    for cd in distinct(g["cd"]):
         sel = g["cd"] == cd
         first = int(g["id"][sel][0])
         if cd < 0:

@@ -30,6 +30,7 @@ import itertools
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..core.localfit import fits_at
 from ..core.trees import kd_tree
 
@@ -111,7 +112,7 @@ class FieldEstimator:
             counts = self._levels[level][1].query_ball_point(x[pending], radius[pending], return_length=True)
             pending = pending[counts <= MAX_NEIGHBOURS]
             chosen[pending] = level
-        for level in np.unique(chosen):
+        for level in distinct(chosen):
             keep, tree = self._levels[level]
             rows = np.flatnonzero(chosen == level)
             balls = tree.query_ball_point(x[rows], radius[rows])

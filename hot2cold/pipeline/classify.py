@@ -34,7 +34,8 @@ from ..core.bspline import (bend_parameters, cut_intervals, evaluate_curve, eval
 from ..io.field import DisplacementField
 from ..core.footpoint import FootPoints, project_to_curve, project_to_surface
 from ..core.domain import Trim
-from ..core.model import Classification, Part, Role, runs
+from ..core.arrays import distinct, runs
+from ..core.model import Classification, Part, Role
 from ..settings import Settings
 
 if TYPE_CHECKING:                              # the kernel's projector is passed in, not built here
@@ -228,7 +229,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
     pair_node, pair_face = _candidates(cKDTree(cloud), cloud_face, points, node_distance, 2.0 * apart)
     reach = _Reach(part, _Boundary.of(part), projector, node_distance, edge_distance)
     group_of_face = np.array([face.solid for face in part.faces], int)
-    groups = np.unique(group_of_face)
+    groups = distinct(group_of_face)
     records = []
     for g in groups:
         keep = group_of_face[pair_face] == g if len(groups) > 1 else slice(None)
@@ -251,7 +252,7 @@ def classify_nodes(part: Part, field: DisplacementField, settings: Settings,
             np.concatenate([np.stack([r[a] for r in records])[w, i] for w, i in picks]) for a in range(6))
         if len(node) > n:
             log.info("%d nodes lie on faces of two or more solids (or free faces): each feeds them all",
-                     len(np.unique(node[n:])))
+                     len(distinct(node[n:])))
     counts = {name: int(np.sum(role == r)) for name, r in
               (("face", Role.FACE), ("edge", Role.EDGE), ("vertex", Role.VERTEX), ("ignored", Role.IGNORED))}
     log.info("classified %d nodes: %s", n, counts)
@@ -443,7 +444,7 @@ def _classify_group(reach: _Reach, points: np.ndarray, pairs: tuple[np.ndarray, 
     on_face = role == Role.FACE
     distance[on_face] = best[on_face]
 
-    _claim_vertices_and_edges(reach, points, rows, np.unique(pair_node), np.unique(pair_face))
+    _claim_vertices_and_edges(reach, points, rows, distinct(pair_node), distinct(pair_face))
     return rows
 
 
@@ -562,7 +563,7 @@ def _claim_vertices_and_edges(reach: _Reach, points: np.ndarray, rows: Classific
         best[idx] = e_dist[hit]
         role[idx], owner[idx], t[idx], uv[idx] = Role.EDGE, e, e_t[hit], np.nan
     on_edge = np.flatnonzero(np.isfinite(best))
-    for e in np.unique(owner[on_edge]):
+    for e in distinct(owner[on_edge]):
         idx = on_edge[owner[on_edge] == e]
         foot[idx] = evaluate_curve(part.edges[e].curve, t[idx])
         distance[idx] = best[idx]

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..core.threads import map_threads
 from ..core.trees import kd_tree, query
 from ..core.bspline import evaluate_curve, evaluate_surface, knot_breaks
@@ -376,7 +377,7 @@ def edge_grids(part: Part, classification: Classification, field: DisplacementFi
             found[edge.index] = (t, hot, nodes[tree.query(hot, k=min(_SLACK_NODES, len(nodes)))[1].reshape(len(t), -1)])
     if not found:
         return [empty] * len(part.edges)
-    asked = np.unique(np.concatenate([closest.ravel() for _, _, closest in found.values()]))
+    asked = distinct(np.concatenate([closest.ravel() for _, _, closest in found.values()]))
     estimate = estimator(np.concatenate([classification.foot[asked]] + [hot for _, hot, _ in found.values()]))
     misses = np.zeros(len(classification.role))
     misses[asked] = np.linalg.norm(estimate[:len(asked)] - field.displacements[asked], axis=1)

@@ -52,6 +52,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..core.bspline import (BSplineCurve, BSplineSurface, evaluate_curve, evaluate_surface, knot_breaks,
                             polyline_length, refine_curve, refine_surface)
 from ..core.footpoint import curve_distances, surface_distances, surface_distances_above
@@ -462,7 +463,7 @@ def _edge_marks(curve: BSplineCurve, t: np.ndarray, bad: np.ndarray, shortest: f
     node and a lower degree)."""
     breaks = knot_breaks(curve.knots, curve.degree)
     mids = []
-    for r in np.unique(_spans(breaks, t[bad])):
+    for r in distinct(_spans(breaks, t[bad])):
         lo, hi = breaks[r], breaks[r + 1]
         mid = 0.5 * (lo + hi)
         if polyline_length(evaluate_curve(curve, np.linspace(lo, mid, 9))) >= shortest:

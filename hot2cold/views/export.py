@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.arrays import distinct
 from ..core.bspline import clip_uv, evaluate_surface
 from ..io.atomic import write_atomically
 
@@ -66,7 +67,7 @@ def points_on_faces(surfaces: list, mesh) -> np.ndarray:
     vertex_face = np.full(len(mesh.vertices), -1)
     vertex_face[mesh.triangles] = mesh.face[:, None]
     points = np.full(mesh.vertices.shape, np.nan)
-    for k in np.unique(mesh.face):
+    for k in distinct(mesh.face):
         idx = np.flatnonzero((vertex_face == k) & np.isfinite(mesh.uv).all(axis=1))
         if len(idx):
             uv = clip_uv(surfaces[k], mesh.uv[idx])

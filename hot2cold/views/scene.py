@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 from scipy.spatial import cKDTree
 
+from ..core.arrays import distinct
 from ..core.model import Role
 from ..kernel.tessellate import TriangleMesh
 from . import pictures
@@ -94,8 +95,8 @@ def surface_deviation(result, mesh: TriangleMesh, cold: np.ndarray, neighbours: 
     errors = np.asarray(result.node_errors, float)
     out = np.full(len(mesh.vertices), np.nan)
     tiny = (1e-9 * float(result.part.diagonal)) ** 2
-    for k in np.unique(mesh.face):
-        verts = np.unique(mesh.triangles[mesh.face == k])
+    for k in distinct(mesh.face):
+        verts = distinct(mesh.triangles[mesh.face == k])
         nodes = _face_nodes(result, int(k))
         nodes = nodes[np.isfinite(errors[nodes])]
         if not len(nodes) or not len(verts):

@@ -1,0 +1,25 @@
+"""Index arrays: their distinct values and their runs, in O(n log n) sorts.
+
+numpy 2.3 and later find ``np.unique(values)`` of integers (given no ``return_*`` option) by a hash table: on
+a million node or face indices that costs many times a sort, and the morph asks for the distinct nodes of every
+candidate pair, element, and group of surface nodes.  :func:`distinct` gives the same sorted array by a sort.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def distinct(values) -> np.ndarray:
+    """The sorted distinct values ``(d,)`` of ``values`` (any shape, flattened), as ``np.unique(values)``."""
+    ordered = np.sort(np.asarray(values).ravel())
+    if len(ordered) < 2:
+        return ordered
+    return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])]
+
+
+def runs(values: np.ndarray) -> list[tuple[int, slice]]:
+    """``(value, slice)`` of each run of equal values of the sorted ``values (c,)``, in order."""
+    cuts = np.flatnonzero(np.diff(values)) + 1
+    starts = np.concatenate([[0], cuts])
+    ends = np.concatenate([cuts, [len(values)]])
+    return [(int(values[a]), slice(a, b)) for a, b in zip(starts, ends) if b > a]
