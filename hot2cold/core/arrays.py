@@ -10,7 +10,8 @@ import numpy as np
 
 
 def distinct(values) -> np.ndarray:
-    """The sorted distinct values ``(d,)`` of ``values`` (any shape, flattened), as ``np.unique(values)``."""
+    """The sorted distinct values ``(d,)`` of ``values`` (any shape, flattened), as ``np.unique(values)`` gives them
+    for integers (and for floats but NaN, which ``np.unique`` merges and this keeps, each NaN apart)."""
     ordered = np.sort(np.asarray(values).ravel())
     if len(ordered) < 2:
         return ordered
