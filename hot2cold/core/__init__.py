@@ -5,6 +5,6 @@ degrees); the part is plain records too (:mod:`.model`, with the sides of a para
 the FE nodes' roles, ``Role``, and where each node takes part, ``Classification``).  Here also the
 truncated-SVD least squares (:mod:`.lstsq`), foot points by Newton's method (:mod:`.footpoint`) and
 trimmed domains as rasters (:mod:`.domain`, with the one numbering of trim states, ``Trim``), and the
-distinct values and runs of index arrays (:mod:`.arrays`).
+distinct values, runs and places in runs of index arrays (:mod:`.arrays`).
 Everything here is tested without OpenCascade and checked against it as an oracle.
 """

@@ -1,4 +1,4 @@
-"""Index arrays: their distinct values and their runs, in O(n log n) sorts.
+"""Index arrays: their distinct values, their runs, and the places within runs laid one after another.
 
 numpy 2.3 and later find ``np.unique(values)`` of integers (given no ``return_*`` option) by a hash table: on
 a million node or face indices that costs many times a sort, and the morph asks for the distinct nodes of every
@@ -16,6 +16,13 @@ def distinct(values) -> np.ndarray:
     if len(ordered) < 2:
         return ordered
     return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])]
+
+
+def run_places(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For runs of ``counts (n,)`` elements laid one after another (``sum(counts)`` in all): the run ``(sum,)`` of
+    each element and its place ``(sum,)`` in its run, from 0."""
+    run = np.repeat(np.arange(len(counts)), counts)
+    return run, np.arange(len(run)) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def runs(values: np.ndarray) -> list[tuple[int, slice]]:

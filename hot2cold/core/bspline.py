@@ -24,6 +24,8 @@ from math import comb as _comb
 import numpy as np
 import scipy.sparse as _sparse
 
+from .arrays import run_places
+
 
 def _as_float_array(a, name: str, ndim: int) -> np.ndarray:
     arr = np.ascontiguousarray(a, dtype=float)
@@ -1129,8 +1131,8 @@ def cut_intervals(points: np.ndarray, pieces: np.ndarray) -> np.ndarray:
     """``points (n,)`` or ``(n, d)`` with the interval between each pair of neighbours cut into ``pieces (n - 1,)``
     (ints, at least 1) equal parts: ``(sum(pieces) + 1,)`` or ``(sum(pieces) + 1, d)``, the given points among them
     in their order."""
-    piece = np.repeat(np.arange(len(pieces)), pieces)
-    share = (np.arange(len(piece)) - np.repeat(np.cumsum(pieces) - pieces, pieces)) / pieces[piece]
+    piece, place = run_places(pieces)
+    share = place / pieces[piece]
     if points.ndim > 1:
         share = share[:, None]
     return np.concatenate([points[piece] + share * (points[piece + 1] - points[piece]), points[-1:]])

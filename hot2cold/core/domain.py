@@ -27,6 +27,7 @@ from enum import IntEnum
 
 import numpy as np
 
+from .arrays import run_places
 from .trees import kd_tree
 
 
@@ -231,8 +232,8 @@ def _centre_states(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
     first_row = np.maximum(np.ceil(lo_v - 0.5), 0).astype(int)
     last_row = np.minimum(np.ceil(hi_v - 0.5) - 1, n - 1).astype(int)     # centres c with lo <= c < hi
     count = np.maximum(last_row - first_row + 1, 0)
-    seg = np.repeat(np.arange(len(a)), count)
-    row = first_row[seg] + np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
+    seg, place = run_places(count)
+    row = first_row[seg] + place
     c = row + 0.5
     pa, pb = a[seg], b[seg]
     u_cross = pa[:, 0] + (c - pa[:, 1]) * (pb[:, 0] - pa[:, 0]) / (pb[:, 1] - pa[:, 1])
@@ -246,9 +247,8 @@ def _near_cells(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
     most half a cell), grown by one cell."""
     near = np.zeros((n + 2, n + 2), bool)
     length = np.ceil(np.max(np.abs(b - a), axis=1) * 2.0).astype(int) + 1
-    seg = np.repeat(np.arange(len(a)), length + 1)
-    first = np.repeat(np.cumsum(length + 1) - (length + 1), length + 1)
-    t = (np.arange(len(seg)) - first) / length[seg]            # 0, 1/k, ..., 1 along each segment
+    seg, place = run_places(length + 1)
+    t = place / length[seg]                                     # 0, 1/k, ..., 1 along each segment
     pts = a[seg] + t[:, None] * (b[seg] - a[seg])
     cell = np.clip(np.floor(pts).astype(int), -1, n) + 1
     near[cell[:, 0], cell[:, 1]] = True
@@ -303,8 +303,7 @@ def _cells_under(lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[np.ndarray, np
     last = np.clip(np.floor(hi).astype(np.int64), 0, n - 1)
     size = last - first + 1
     count = size[:, 0] * size[:, 1]
-    item = np.repeat(np.arange(len(lo)), count)
-    k = np.arange(len(item)) - np.repeat(np.cumsum(count) - count, count)
+    item, k = run_places(count)
     i = first[item, 0] + k // size[item, 1]
     j = first[item, 1] + k % size[item, 1]
     cells = i * n + j

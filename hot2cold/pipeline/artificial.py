@@ -30,7 +30,7 @@ import itertools
 
 import numpy as np
 
-from ..core.arrays import distinct
+from ..core.arrays import distinct, run_places
 from ..core.localfit import fits_at
 from ..core.trees import kd_tree
 
@@ -119,10 +119,8 @@ class FieldEstimator:
             sizes = np.fromiter(map(len, balls), np.int64, count=len(balls))
             found = keep[np.fromiter(itertools.chain.from_iterable(balls), np.int64, count=int(sizes.sum()))]
             # each ball's foot points in the random order (their rank), the first MAX_NEIGHBOURS of it kept
-            owner = np.repeat(np.arange(len(rows)), sizes)
-            order = np.argsort(owner * len(self._points) + self._rank[found])
-            found = found[order]
-            place = np.arange(len(found)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+            owner, place = run_places(sizes)
+            found = found[np.argsort(owner * len(self._points) + self._rank[found])]
             take = place < MAX_NEIGHBOURS
             idx[rows[owner[take]], place[take]] = found[take]
             valid[rows[owner[take]], place[take]] = True
