@@ -596,6 +596,24 @@ def test_reduced_rows_solve_as_the_rows_themselves(fmt, k, full_svd_up_to):
     np.testing.assert_array_equal(reduced.factor, reduce_rows(_as_format(a, fmt), b).factor)
 
 
+@pytest.mark.parametrize("k", [None, 3])
+def test_reduced_rows_of_one_unknown_solve_alike_again(k):
+    """A face with one free pole: its reduced rows' factor is one row, whose ``R`` is a single column (already
+    in Fortran order); solving them must not let the SVD overwrite it, so the second solve, and the third, give
+    the first one's solution and the factor stays the rows' own."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(20, 1))
+    b = rng.normal(size=20 if k is None else (20, k))
+    reduced = reduce_rows(a, b)
+    first = solve_tsvd(reduced, None)
+    for _ in range(2):
+        again = solve_tsvd(reduced, None)
+        np.testing.assert_array_equal(again.x, first.x)
+    np.testing.assert_array_equal(reduced.factor, reduce_rows(a, b).factor)
+    direct = solve_tsvd(a, b)
+    np.testing.assert_allclose(first.x, direct.x, rtol=1e-12, atol=0)
+
+
 def test_reduced_rows_are_checked():
     with pytest.raises(ValueError, match="tall problems"):
         reduce_rows(np.ones((4, 6)), np.ones(4))

@@ -555,8 +555,10 @@ def _tall_spectrum(problem: _Problem, options: _Options, target: float | None) -
         if fast is not None:
             return fast
     # R alone, in the layout LAPACK takes, and overwritten: the SVD's workspace is about 4 n^2 beside its
-    # factors, and a copy of R and the augmented factor beside it would add 2 n^2 more
-    r, c = np.asfortranarray(rc[:, :n]), rc[:, n:].copy()
+    # factors, and a copy of R and the augmented factor beside it would add 2 n^2 more.  Always a copy:
+    # ``rc`` may be a ReducedRows' own factor, solved again later, and ``np.asfortranarray`` hands back a
+    # slice that is Fortran-ordered already (one column, n = 1) as it is, for the SVD to overwrite.
+    r, c = np.array(rc[:, :n], order="F"), rc[:, n:].copy()
     del rc
     try:
         ur, sigma, vt = _svd(r, overwrite=True)
