@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse
 from OCP.gp import gp_Pnt, gp_Vec
 
-from hot2cold.core.bspline import (BasisMemo, BSplineCurve, BSplineSurface, _span_rows, curve_basis,
+from hot2cold.core.bspline import (BasisMemo, BSplineCurve, BSplineSurface, _span_rows, curve_basis, evaluated,
                                    curve_derivative_basis, evaluate_curve, evaluate_surface, refine_surface,
                                    surface_basis, surface_derivative_bases, surface_derivatives, surface_first_jet,
                                    surface_normals)
@@ -486,6 +486,57 @@ def test_remembered_rows_are_bounded_private_and_not_pickled():
     assert not memo._rows and memo._bytes == 0
     surface_first_jet(s, u, v)                      # a closed memo keeps nothing more
     assert not memo._rows and memo._bytes == 0
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_evaluations_kept_by_content(rational):
+    """``evaluated`` gives what the evaluation gives, read-only; asked again of the same surface or of one equal to
+    the bit made apart (a correction run again on the same fits) at the same parameters, the kept array; at other
+    parameters, of a surface with a pole moved or of one without a memo, a new evaluation.  The memo keeps at
+    most its budget, and nothing once closed."""
+    rng = np.random.default_rng(12 + rational)
+    s = random_surface(rng, 3, 2, rational)
+    memo = BasisMemo(evaluation_budget=20_000)
+    s.remember(memo)
+    u, v = surface_params(rng, s)
+    first = evaluated(surface_normals, s, u, v)
+    assert np.array_equal(first, surface_normals(s, u, v), equal_nan=True) and not first.flags.writeable
+    assert evaluated(surface_normals, s, u, v) is first
+    twin = s.with_poles(s.poles.copy())
+    assert twin is not s and evaluated(surface_normals, twin, u, v) is first
+    poles = s.poles.copy()
+    poles[1, 1, 0] += 1.0
+    for other, (a, b) in ((s.with_poles(poles), (u, v)), (s, (u[::-1], v[::-1])), (s, (u, v[::-1]))):
+        again = evaluated(surface_normals, other, a, b)
+        assert again is not first
+        assert np.array_equal(again, surface_normals(other, a, b), equal_nan=True)
+    assert evaluated(evaluate_surface, s, u, v) is not evaluated(surface_normals, s, u, v)
+    plain = random_surface(rng, 2, 2, rational)                       # no memo: evaluated each time
+    pu, pv = surface_params(rng, plain)
+    assert evaluated(surface_normals, plain, pu, pv) is not evaluated(surface_normals, plain, pu, pv)
+    for m in (200, 300, 400):
+        u0, u1, v0, v1 = s.domain
+        evaluated(surface_normals, s, rng.uniform(u0, u1, m), rng.uniform(v0, v1, m))
+        assert memo._evaluation_bytes <= memo.evaluation_budget
+    memo.close()
+    assert not memo._evaluations and memo._evaluation_bytes == 0
+    assert evaluated(surface_normals, s, u, v).flags.writeable and not memo._evaluations
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_curve_digest_tells_content_not_objects(rational):
+    """Curves equal to the bit give one digest, made apart or copied; a pole moved to the next float, a knot
+    moved or another degree's record, another."""
+    rng = np.random.default_rng(9 + rational)
+    c = random_curve(rng, 3, rational)
+    copy = BSplineCurve(c.poles.copy(), c.knots.copy(), c.degree, None if c.weights is None else c.weights.copy())
+    assert copy is not c and copy.digest() == c.digest() == c.with_poles(c.poles.copy()).digest()
+    poles = c.poles.copy()
+    poles[1, 0] = np.nextafter(poles[1, 0], np.inf)
+    knots = c.knots.copy()
+    knots[c.degree + 1] = np.nextafter(knots[c.degree + 1], -np.inf)
+    others = [c.with_poles(poles), BSplineCurve(c.poles, knots, c.degree, c.weights)]
+    assert len({c.digest(), *(o.digest() for o in others)}) == len(others) + 1
 
 
 @pytest.mark.parametrize("rational", [False, True])

@@ -661,17 +661,31 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
         np.testing.assert_allclose(fit.surface.poles, direct.surface.poles, rtol=0, atol=1e-9)
         assert (fit.rank, fit.unknowns, fit.nodes) == (direct.rank, direct.unknowns, direct.nodes)
         if scale == 1.0:
-            kept = context._problems[k][1]
+            (kept,) = _kept_problems(context, k)
             assert isinstance(kept.rows, ReducedRows)
-        assert context._problems[k][1] is kept                            # read once
+        assert _kept_problems(context, k) == [kept]                       # read once
     # the context on a refined part (G1 after the refinement, G1's own trial) finds the same face's rows
     moved = context.with_part(replace(part))
     moved.fit_face(moved.part, face, edges, (rows, targets))
-    assert moved._problems[k][1] is kept
+    assert _kept_problems(moved, k) == [kept]
     use = face.uses[0].edge
-    edges[use] = replace(edges[use])                                      # the same curve, a new morph
+    edges[use] = replace(edges[use], curve=replace(edges[use].curve))     # the same curve, new objects
     context.fit_face(part, face, edges, (rows, targets))
-    assert context._problems[k][1] is not kept
+    assert _kept_problems(context, k) == [kept]
+    curve = edges[use].curve
+    edges[use] = replace(edges[use], curve=curve.with_poles(curve.poles + 1e-3))    # the edge moved: new rows
+    fit = context.fit_face(part, face, edges, (rows, targets))
+    assert len(_kept_problems(context, k)) == 2 and _kept_problems(context, k)[0] is kept
+    direct = morph_face(face, part, edges, inputs, (rows, targets))
+    np.testing.assert_allclose(fit.surface.poles, direct.surface.poles, rtol=0, atol=1e-9)
+    assert not np.allclose(fit.surface.poles, context.fit_face(part, face, list(result.edges), (rows, targets))
+                           .surface.poles, rtol=0, atol=1e-6)            # and the first edge's fit is found again
+    assert len(_kept_problems(context, k)) == 2
+
+
+def _kept_problems(context, k: int) -> list:
+    """The reduced problems ``context`` keeps for face ``k`` (:meth:`MorphContext.fit_face`), oldest first."""
+    return [problem for _, problem in context._problems.get(k, {}).values()]
 
 
 def test_kink_maxima_are_each_edges_own_largest_kink(blade_part):

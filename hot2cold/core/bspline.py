@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from math import comb as _comb
 
@@ -92,6 +93,22 @@ class BSplineCurve:
         """The same curve (degree, knots, weights) with other poles ``(n, 3)``."""
         return _same_layout(self, replace(self, poles=poles))
 
+    def digest(self) -> bytes:
+        """16 bytes of the curve's content (degree, knots, poles, weights), as :meth:`BSplineSurface.digest`."""
+        return _digest((self.degree,), (self.knots, self.poles, self.weights))
+
+
+def _digest(degrees: tuple[int, ...], arrays: tuple[np.ndarray | None, ...]) -> bytes:
+    """16 bytes of a record's content: its ``degrees``, whether it is rational (the last of ``arrays``, its
+    weights, not None) and the shapes and bytes of ``arrays``; equal for records equal to the bit."""
+    found = hashlib.blake2b(digest_size=16)
+    found.update(np.array([*degrees, arrays[-1] is not None]).tobytes())
+    for array in arrays:
+        if array is not None:
+            found.update(str(array.shape).encode())
+            found.update(np.ascontiguousarray(array).tobytes())
+    return found.digest()
+
 
 @dataclass(frozen=True, eq=False)
 class BSplineSurface:
@@ -160,13 +177,7 @@ class BSplineSurface:
         """16 bytes of the surface's content (degrees, knots, poles, weights), worked out on each call: equal for
         records equal to the bit.  The key of caches that should find a surface made again as another object
         (a correction run again on the same fits)."""
-        found = hashlib.blake2b(digest_size=16)
-        found.update(np.array([self.u_degree, self.v_degree, self.weights is not None]).tobytes())
-        for array in (self.u_knots, self.v_knots, self.poles, self.weights):
-            if array is not None:
-                found.update(str(array.shape).encode())
-                found.update(np.ascontiguousarray(array).tobytes())
-        return found.digest()
+        return _digest((self.u_degree, self.v_degree), (self.u_knots, self.v_knots, self.poles, self.weights))
 
     def with_poles(self, poles: np.ndarray) -> "BSplineSurface":
         """The same surface (degrees, knots, weights) with another control net ``(nu, nv, 3)``."""
@@ -195,6 +206,8 @@ def _same_layout(old, new):
 
 #: What a :class:`BasisMemo` holds at the most (bytes), and the most rows of one request it keeps.
 MEMO_BYTES, MEMO_ROWS = 32 * 2 ** 20, 512
+#: What a :class:`BasisMemo` holds at the most (bytes) of whole evaluations (:func:`evaluated`).
+MEMO_EVALUATION_BYTES = 16 * 2 ** 20
 
 
 class BasisMemo:
@@ -205,13 +218,18 @@ class BasisMemo:
     :meth:`BSplineSurface.with_poles`) at its hot face's parameters.  Requests of up to ``max_rows``
     parameters are kept, keyed by the surface's knot layouts (:class:`KnotLayout`, one object per record and
     the records made from it with other poles: the same knots, degrees and weights) and the parameters; the
-    least recently used go first beyond ``budget`` bytes.  The arrays kept are read-only.  Thread-safe: the
-    stages work on faces in threads."""
+    least recently used go first beyond ``budget`` bytes.  Whole evaluations asked again of a surface of the
+    same content at the same parameters (G1 measures the kinks along every tangent edge in each of its rounds,
+    most faces unchanged) are kept apart, up to ``evaluation_budget`` bytes (:func:`evaluated`).  The arrays
+    kept are read-only.  Thread-safe: the stages work on faces in threads."""
 
-    def __init__(self, budget: int = MEMO_BYTES, max_rows: int = MEMO_ROWS):
-        self.budget, self.max_rows = budget, max_rows
+    def __init__(self, budget: int = MEMO_BYTES, max_rows: int = MEMO_ROWS,
+                 evaluation_budget: int = MEMO_EVALUATION_BYTES):
+        self.budget, self.max_rows, self.evaluation_budget = budget, max_rows, evaluation_budget
         self._rows: dict[tuple, tuple[int, np.ndarray, list[np.ndarray]]] = {}
         self._bytes = 0
+        self._evaluations: dict[tuple, np.ndarray] = {}
+        self._evaluation_bytes = 0
         self._lock = threading.Lock()
 
     def get(self, key: tuple, nu: int) -> tuple[np.ndarray, list[np.ndarray]] | None:
@@ -241,12 +259,40 @@ class BasisMemo:
                 oldest = next(iter(self._rows))                             # the least recently used
                 self._bytes -= _size(oldest, self._rows.pop(oldest))
 
+    def evaluation(self, key: tuple) -> np.ndarray | None:
+        """The evaluation kept under ``key`` (:func:`evaluated`), or None."""
+        with self._lock:
+            found = self._evaluations.pop(key, None)
+            if found is not None:
+                self._evaluations[key] = found                          # the most recently used last
+            return found
+
+    def keep_evaluation(self, key: tuple, found: np.ndarray) -> None:
+        """Keep the evaluation ``found`` under ``key`` (made read-only)."""
+        if self.evaluation_budget <= 0:
+            return
+        found.flags.writeable = False
+        size = found.nbytes + len(key[-2]) + len(key[-1])
+        with self._lock:
+            old = self._evaluations.pop(key, None)
+            if old is not None:
+                self._evaluation_bytes -= old.nbytes + len(key[-2]) + len(key[-1])
+            self._evaluations[key] = found
+            self._evaluation_bytes += size
+            while self._evaluation_bytes > self.evaluation_budget and self._evaluations:
+                oldest = next(iter(self._evaluations))                      # the least recently used
+                self._evaluation_bytes -= self._evaluations.pop(oldest).nbytes + len(oldest[-2]) + len(oldest[-1])
+
     def close(self) -> None:
-        """Forget every row kept and keep none from now on (the surfaces of a finished morph still hold it)."""
+        """Forget every row and evaluation kept and keep none from now on (the surfaces of a finished morph still
+        hold it)."""
         with self._lock:
             self._rows.clear()
             self._bytes = 0
             self.budget = 0
+            self._evaluations.clear()
+            self._evaluation_bytes = 0
+            self.evaluation_budget = 0
 
 
 def _size(key: tuple, entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:
@@ -738,6 +784,25 @@ def surface_normals(surface: BSplineSurface, u, v) -> np.ndarray:
     may turn a normal that is defined.
     """
     return _unit_normals(*_normal_parts(surface, u, v))
+
+
+def evaluated(evaluate: Callable[[BSplineSurface, np.ndarray, np.ndarray], np.ndarray], surface: BSplineSurface,
+              u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``evaluate(surface, u, v)`` (an evaluation of ``surface`` at the parameters ``u``, ``v`` (m,), one array of
+    rows ``(m, ...)``, as :func:`surface_normals`), kept in the surface's :class:`BasisMemo` where it has one, by
+    ``evaluate``, the surface's content (:meth:`BSplineSurface.digest`) and the parameters: asked again of a
+    surface of the same content (the same object, or one made again equal to the bit) at the same parameters, the
+    same array comes back, read-only.  ``evaluate`` should be a function of the module level: a closure made
+    anew for each call is another key each time."""
+    memo = surface.__dict__.get("_memo")
+    if memo is None or memo.evaluation_budget <= 0:
+        return evaluate(surface, u, v)
+    key = (evaluate, surface.digest(), np.asarray(u, float).tobytes(), np.asarray(v, float).tobytes())
+    found = memo.evaluation(key)
+    if found is None:
+        found = evaluate(surface, u, v)
+        memo.keep_evaluation(key, found)
+    return found
 
 
 def _unit_normals(nrm: np.ndarray, lu: np.ndarray, lv: np.ndarray, noise_u: np.ndarray, noise_v: np.ndarray

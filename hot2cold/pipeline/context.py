@@ -27,6 +27,10 @@ from .g1 import CornerReport, TangentEdge, correct_corners, corners_touched, edg
 
 __all__ = ["MorphContext"]
 
+#: Reduced fits kept per face (:meth:`MorphContext.fit_face`): its plain fit and its fit at anchored corners, on
+#: the part and on a refinement trial's.
+_PROBLEMS_KEPT = 4
+
 
 @dataclass(frozen=True, eq=False)
 class MorphContext:
@@ -64,8 +68,9 @@ class MorphContext:
     distances: FieldDistance
     strain: float = 0.0
     noise: float = 0.0
-    #: The last fit of each face on a tangent edge, its rows reduced (face -> (what it was fitted on, its
-    #: FaceProblem)): G1 and G2 fit such a face again and again with other turning and bending rows only.
+    #: The last fits of each face on a tangent edge, their rows reduced (face -> its edges' morphed curves'
+    #: digests -> (its face and edges, its FaceProblem); :data:`_PROBLEMS_KEPT` a face): G1 and G2 fit such a
+    #: face again and again with other turning and bending rows only.
     _problems: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
@@ -121,18 +126,22 @@ class MorphContext:
         (eq. 23-38); :func:`~hot2cold.pipeline.refine.refine`'s ``fit_face``; ``turn``: rows that turn it
         along trimming curves (:func:`~hot2cold.pipeline.g1.turn_rows`).  A face on a tangent edge keeps its
         rows reduced (:func:`~hot2cold.pipeline.face_fit.face_problem`) while it, its edges and their morphs
-        stay the same objects: G1 and G2 fit it again with other turning or bending rows only, at the cost of
-        those rows."""
+        stay the same: G1 and G2 fit it again with other turning or bending rows only, at the cost of those
+        rows."""
         if not any(face.index in te.faces for te in self.tangent):
             return morph_face(face, part, edge_morphs, self.fit_inputs, turn)
-        # what the fit reads besides the context: the face, its edges and their morphs (objects, compared by
-        # identity: a refined part or a moved edge is a new object)
-        basis = (face, *(part.edges[u.edge] for u in face.uses), *(edge_morphs[u.edge] for u in face.uses))
-        kept = self._problems.get(face.index)
-        if kept is None or len(kept[0]) != len(basis) or any(a is not b for a, b in zip(kept[0], basis)):
-            kept = basis, face_problem(face, part, edge_morphs, self.fit_inputs, reduce=True)
-            self._problems[face.index] = kept
-        return solve_face(kept[1], self.settings, self.noise, turn)
+        # what the fit reads besides the context: the face and its edges (objects, compared by identity: a
+        # refined part's are new objects) and their morphed curves (by content: G1's refinement trials anchor
+        # the corners of the plain fits again, into the same curves as other objects)
+        basis = (face, *(part.edges[u.edge] for u in face.uses))
+        curves = tuple(b"" if (curve := edge_morphs[u.edge].curve) is None else curve.digest() for u in face.uses)
+        kept = self._problems.setdefault(face.index, {})
+        found = kept.get(curves)
+        if found is None or len(found[0]) != len(basis) or any(a is not b for a, b in zip(found[0], basis)):
+            found = kept[curves] = basis, face_problem(face, part, edge_morphs, self.fit_inputs, reduce=True)
+            while len(kept) > _PROBLEMS_KEPT:
+                del kept[next(iter(kept))]          # the oldest
+        return solve_face(found[1], self.settings, self.noise, turn)
 
     def refit_faces(self, faces: list[int], edge_morphs: list[EdgeMorph], turns: list[tuple | None] | None = None
                     ) -> list[FaceMorph]:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import sparse
 
-from ..core.bspline import (BSplineCurve, BSplineSurface, cross, knot_breaks, normals_and_rounding,
+from ..core.bspline import (BSplineCurve, BSplineSurface, cross, evaluated, knot_breaks, normals_and_rounding,
                             surface_derivative_bases, surface_normals)
 from ..core.lstsq import solve_tsvd
 from ..core.model import EdgeUse, Face, Part, Side, side_along
@@ -151,10 +151,16 @@ def _evaluate_by_face(surfaces: list[BSplineSurface], asked: list[tuple[int, np.
     out: list[np.ndarray] = [np.zeros((0, 3))] * len(asked)
     for k, these in rows.items():
         uv = np.concatenate([asked[i][1] for i in these])
-        found = evaluate(surfaces[k], uv[:, 0], uv[:, 1])
+        found = evaluated(evaluate, surfaces[k], uv[:, 0], uv[:, 1])
         for i, n in zip(these, np.split(found, np.cumsum([len(asked[i][1]) for i in these])[:-1])):
             out[i] = n
     return out
+
+
+def _normals_rounding(surface: BSplineSurface, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`~hot2cold.core.bspline.normals_and_rounding` as one array ``(m, 4)``: the unit normals, then the
+    rounding."""
+    return np.column_stack(normals_and_rounding(surface, u, v))
 
 
 def hot_measurable(part: Part, asked_a: list[tuple[int, np.ndarray]], asked_b: list[tuple[int, np.ndarray]]
@@ -162,11 +168,8 @@ def hot_measurable(part: Part, asked_a: list[tuple[int, np.ndarray]], asked_b: l
     """:func:`hot_defined` for many pairs of faces at once: per pair ``i`` the ``(m_i,)`` bool at the matching
     parameters ``asked_a[i] = (face a, uv_a (m_i, 2))`` and ``asked_b[i] = (face b, uv_b (m_i, 2))``, each hot
     face evaluated once for all that is asked of it."""
-    def normals_rounding(surface: BSplineSurface, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return np.column_stack(normals_and_rounding(surface, u, v))                  # (m, 4)
-
     hot = [face.surface for face in part.faces]
-    found = _evaluate_by_face(hot, list(asked_a) + list(asked_b), normals_rounding)
+    found = _evaluate_by_face(hot, list(asked_a) + list(asked_b), _normals_rounding)
     bound = np.radians(MEASURABLE_DEG)
     n = len(asked_a)
     return [np.isfinite(_line_angles(a[:, :3], b[:, :3])) & (a[:, 3] <= bound) & (b[:, 3] <= bound)
@@ -670,14 +673,15 @@ def turn_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float,
     part, surfaces, kept = near.part, near.surfaces, near.kept
     hot, cold = part.faces[k].surface, surfaces[k]
     spans = mean_spans(hot)
-    rows, targets = [], []
+    rows, scales, targets = [], [], []
     for te in edges:
         if k not in te.faces or (te.sides[te.faces.index(k)] is not None and not sides):
             continue
         other = te.faces[1 - te.faces.index(k)]
         uv, uv_o, measurable = hot_edge_points(part, te, k, max(near.n_points_factor * sum(hot.shape), 2))
-        n = surface_normals(cold, uv[:, 0], uv[:, 1])
-        n_o = surface_normals(surfaces[other], uv_o[:, 0], uv_o[:, 1])
+        # (the same neighbours' normals at the same points in every round and trial: kept by content)
+        n = evaluated(surface_normals, cold, uv[:, 0], uv[:, 1])
+        n_o = evaluated(surface_normals, surfaces[other], uv_o[:, 0], uv_o[:, 1])
         keep = np.isfinite(n).all(axis=1) & np.isfinite(n_o).all(axis=1) & measurable
         n_t = n_o if other in kept else n + np.where(np.sum(n * n_o, axis=1) < 0, -1.0, 1.0)[:, None] * n_o
         n_t = n_t[keep] / np.linalg.norm(n_t[keep], axis=1, keepdims=True)
@@ -685,11 +689,14 @@ def turn_rows(near: Neighbours, edges: list[TangentEdge], k: int, weight: float,
         for basis, step in zip(bases, spans):
             tangent = basis @ cold.poles.reshape(-1, 3)
             wanted = tangent - np.sum(tangent * n_t, axis=1)[:, None] * n_t                 # eq. (65)
-            rows.append(weight * step * basis)
+            rows.append(basis)
+            scales.append(np.full(basis.nnz, weight * step))
             targets.append(weight * step * (wanted - basis @ hot.poles.reshape(-1, 3)))
     if not rows:
         return sparse.csr_array((0, hot.shape[0] * hot.shape[1])), np.zeros((0, 3))
-    return sparse.vstack(rows, format="csr"), np.concatenate(targets)
+    stacked = sparse.vstack(rows, format="csr")
+    stacked.data *= np.concatenate(scales)          # each basis times its weight and span, as one product
+    return stacked, np.concatenate(targets)
 
 
 # ------------------------------------------------------------------------------------------------------
