@@ -564,7 +564,7 @@ def _solve_face(face: Face, surfaces: list[BSplineSurface], tied: tuple[Side, ..
         n_t = task.normal_t[task.keep]
         delta = -(np.sum(tangent * n_t, axis=1) / np.sum(n_t * n_t, axis=1))[:, None] * n_t   # eq. (65)
         scale = 1.0 / max(float(np.mean(np.linalg.norm(tangent, axis=1))), np.finfo(float).tiny)
-        rows.append(scale * basis[:, cols].toarray())            # eq. (70)-(75), dp_i0 = 0 (eq. 74)
+        rows.append(scale * basis.toarray()[:, cols])            # eq. (70)-(75), dp_i0 = 0 (eq. 74)
         rhs.append(scale * delta)
     if not rows:
         return
