@@ -626,7 +626,7 @@ def test_kink_misses_are_the_edge_points_kinked_beyond_the_limit_on_both_faces()
 
 
 @pytest.mark.heavy
-def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_nodes):
+def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_nodes, monkeypatch):
     """G1 and G2 fit a face on a tangent edge again with other turning or bending rows only: its rows are
     reduced once (a face with 470 000 nodes took 0.3 s of QR and 0.1 s of rows for each turn) and each new set
     of steering rows gives the fit morph_face gives with them, in this context and in it on another part
@@ -681,6 +681,13 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     assert not np.allclose(fit.surface.poles, context.fit_face(part, face, list(result.edges), (rows, targets))
                            .surface.poles, rtol=0, atol=1e-6)            # and the first edge's fit is found again
     assert len(_kept_problems(context, k)) == 2
+    # where a face's kept factors would hold more than the bound, only the newest fit stays
+    from hot2cold.pipeline import context as context_module
+    monkeypatch.setattr(context_module, "_PROBLEM_BYTES", kept.rows.factor.nbytes)
+    edges[use] = replace(edges[use], curve=curve.with_poles(curve.poles - 1e-3))
+    context.fit_face(part, face, edges, (rows, targets))
+    (newest,) = _kept_problems(context, k)
+    assert newest is not kept
 
 
 def _kept_problems(context, k: int) -> list:

@@ -13,6 +13,7 @@ from typing import Callable
 import numpy as np
 
 from ..core.domain import Trim
+from ..core.lstsq import ReducedRows
 from ..core.model import Classification, Face, Part, Role
 from ..core.threads import map_threads
 from ..io.field import DisplacementField
@@ -28,8 +29,9 @@ from .g1 import CornerReport, TangentEdge, correct_corners, corners_touched, edg
 __all__ = ["MorphContext"]
 
 #: Reduced fits kept per face (:meth:`MorphContext.fit_face`): its plain fit and its fit at anchored corners, on
-#: the part and on a refinement trial's.
-_PROBLEMS_KEPT = 4
+#: the part and on a refinement trial's; the older ones go while a face's kept factors hold more than
+#: ``_PROBLEM_BYTES`` (the newest always stays, as one fit of a face was kept before the others were).
+_PROBLEMS_KEPT, _PROBLEM_BYTES = 4, 16 * 2 ** 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,8 +71,8 @@ class MorphContext:
     strain: float = 0.0
     noise: float = 0.0
     #: The last fits of each face on a tangent edge, their rows reduced (face -> its edges' morphed curves'
-    #: digests -> (its face and edges, its FaceProblem); :data:`_PROBLEMS_KEPT` a face): G1 and G2 fit such a
-    #: face again and again with other turning and bending rows only.
+    #: digests -> (its face and edges, its FaceProblem); :data:`_PROBLEMS_KEPT` and :data:`_PROBLEM_BYTES` a
+    #: face): G1 and G2 fit such a face again and again with other turning and bending rows only.
     _problems: dict = dataclass_field(default_factory=dict, init=False, repr=False)
 
     @classmethod
@@ -139,7 +141,7 @@ class MorphContext:
         found = kept.get(curves)
         if found is None or len(found[0]) != len(basis) or any(a is not b for a, b in zip(found[0], basis)):
             found = kept[curves] = basis, face_problem(face, part, edge_morphs, self.fit_inputs, reduce=True)
-            while len(kept) > _PROBLEMS_KEPT:
+            while len(kept) > 1 and (len(kept) > _PROBLEMS_KEPT or _factor_bytes(kept) > _PROBLEM_BYTES):
                 del kept[next(iter(kept))]          # the oldest
         return solve_face(found[1], self.settings, self.noise, turn)
 
@@ -168,3 +170,8 @@ class MorphContext:
                                         vertices=corners_touched(part, curves, refined))
             edge_morphs = [m if m.curve is c else replace(m, curve=c) for m, c in zip(edge_morphs, curves)]
         return edge_morphs
+
+
+def _factor_bytes(kept: dict) -> int:
+    """The bytes of the reduced rows' factors among the fits ``kept`` of one face (:meth:`MorphContext.fit_face`)."""
+    return sum(problem.rows.factor.nbytes for _, problem in kept.values() if isinstance(problem.rows, ReducedRows))
