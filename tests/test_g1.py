@@ -630,7 +630,8 @@ def test_a_face_turned_again_and_again_reads_its_rows_once(block_shape, block_no
     """G1 and G2 fit a face on a tangent edge again with other turning or bending rows only: its rows are
     reduced once (a face with 470 000 nodes took 0.3 s of QR and 0.1 s of rows for each turn) and each new set
     of steering rows gives the fit morph_face gives with them, in this context and in it on another part
-    (:meth:`MorphContext.with_part`); a new edge morph is a new problem."""
+    (:meth:`MorphContext.with_part`); the same curves as new objects are the same problem, a moved edge a new one
+    (the first kept beside it, up to the bytes a face may keep)."""
     from dataclasses import replace
 
     from hot2cold.core.lstsq import ReducedRows
