@@ -456,7 +456,7 @@ def test_remembered_rows_are_the_rows(rational):
             assert np.array_equal(surface_normals(a, u, v), surface_normals(b, u, v), equal_nan=True)
             for x, y in zip(surface_derivative_bases(a, u, v), surface_derivative_bases(b, u, v)):
                 assert np.array_equal(x.toarray(), y.toarray())
-    assert memo._rows, "nothing was remembered"
+    assert memo._rows.entries, "nothing was remembered"
 
 
 def test_remembered_rows_are_bounded_private_and_not_pickled():
@@ -472,8 +472,8 @@ def test_remembered_rows_are_bounded_private_and_not_pickled():
     u0, u1, v0, v1 = s.domain
     for m in (30, 30, 30, 30, 150):
         surface_first_jet(s, rng.uniform(u0, u1, m), rng.uniform(v0, v1, m))
-        assert memo._bytes <= memo.budget
-    assert all(len(entry[1]) <= 100 for entry in memo._rows.values())
+        assert memo._rows.bytes <= memo.budget
+    assert all(len(entry[1]) <= 100 for entry in memo._rows.entries.values())
     u, v = rng.uniform(u0, u1, 20), rng.uniform(v0, v1, 20)
     before = surface_basis(s, u, v).toarray()
     basis = surface_basis(s, u, v)                  # served from the memo
@@ -483,9 +483,9 @@ def test_remembered_rows_are_bounded_private_and_not_pickled():
     assert back.__dict__.get("_memo") is None
     assert np.array_equal(evaluate_surface(back, u, v), evaluate_surface(s, u, v))
     memo.close()
-    assert not memo._rows and memo._bytes == 0
+    assert not memo._rows.entries and memo._rows.bytes == 0
     surface_first_jet(s, u, v)                      # a closed memo keeps nothing more
-    assert not memo._rows and memo._bytes == 0
+    assert not memo._rows.entries and memo._rows.bytes == 0
 
 
 @pytest.mark.parametrize("rational", [False, True])
@@ -517,10 +517,10 @@ def test_evaluations_kept_by_content(rational):
     for m in (200, 300, 400):
         u0, u1, v0, v1 = s.domain
         evaluated(surface_normals, s, rng.uniform(u0, u1, m), rng.uniform(v0, v1, m))
-        assert memo._evaluation_bytes <= memo.evaluation_budget
+        assert memo._evaluations.bytes <= memo.evaluation_budget
     memo.close()
-    assert not memo._evaluations and memo._evaluation_bytes == 0
-    assert evaluated(surface_normals, s, u, v).flags.writeable and not memo._evaluations
+    assert not memo._evaluations.entries and memo._evaluations.bytes == 0
+    assert evaluated(surface_normals, s, u, v).flags.writeable and not memo._evaluations.entries
 
 
 @pytest.mark.parametrize("rational", [False, True])

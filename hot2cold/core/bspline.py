@@ -225,21 +225,28 @@ class BasisMemo:
 
     def __init__(self, budget: int = MEMO_BYTES, max_rows: int = MEMO_ROWS,
                  evaluation_budget: int = MEMO_EVALUATION_BYTES):
-        self.budget, self.max_rows, self.evaluation_budget = budget, max_rows, evaluation_budget
-        self._rows: dict[tuple, tuple[int, np.ndarray, list[np.ndarray]]] = {}
-        self._bytes = 0
-        self._evaluations: dict[tuple, np.ndarray] = {}
-        self._evaluation_bytes = 0
+        self.max_rows = max_rows
+        self._rows = _Kept(budget, _size)
+        self._evaluations = _Kept(evaluation_budget, _evaluation_size)
         self._lock = threading.Lock()
+
+    @property
+    def budget(self) -> int:
+        """The bytes of basis rows kept at the most (0 once closed)."""
+        return self._rows.budget
+
+    @property
+    def evaluation_budget(self) -> int:
+        """The bytes of whole evaluations kept at the most (0 once closed)."""
+        return self._evaluations.budget
 
     def get(self, key: tuple, nu: int) -> tuple[np.ndarray, list[np.ndarray]] | None:
         """The rows ``(cols, vals)`` of :func:`_surface_rows` up to derivatives of order ``nu`` kept under
         ``key``, or None."""
         with self._lock:
-            found = self._rows.pop(key, None)
-            if found is None:
-                return None
-            self._rows[key] = found                                     # the most recently used last
+            found = self._rows.get(key)
+        if found is None:
+            return None
         have, cols, vals = found
         return (cols, vals[:_ROW_SETS[nu]]) if have >= nu else None
 
@@ -250,54 +257,72 @@ class BasisMemo:
         for a in (cols, *vals):
             a.flags.writeable = False
         with self._lock:
-            old = self._rows.pop(key, None)
-            if old is not None:
-                self._bytes -= _size(key, old)
-            self._rows[key] = (nu, cols, list(vals))     # its own list: the caller's may change
-            self._bytes += _size(key, self._rows[key])
-            while self._bytes > self.budget and self._rows:
-                oldest = next(iter(self._rows))                             # the least recently used
-                self._bytes -= _size(oldest, self._rows.pop(oldest))
+            self._rows.put(key, (nu, cols, list(vals)))     # its own list: the caller's may change
 
     def evaluation(self, key: tuple) -> np.ndarray | None:
         """The evaluation kept under ``key`` (:func:`evaluated`), or None."""
         with self._lock:
-            found = self._evaluations.pop(key, None)
-            if found is not None:
-                self._evaluations[key] = found                          # the most recently used last
-            return found
+            return self._evaluations.get(key)
 
     def keep_evaluation(self, key: tuple, found: np.ndarray) -> None:
         """Keep the evaluation ``found`` under ``key`` (made read-only)."""
         if self.evaluation_budget <= 0:
             return
         found.flags.writeable = False
-        size = found.nbytes + len(key[-2]) + len(key[-1])
         with self._lock:
-            old = self._evaluations.pop(key, None)
-            if old is not None:
-                self._evaluation_bytes -= old.nbytes + len(key[-2]) + len(key[-1])
-            self._evaluations[key] = found
-            self._evaluation_bytes += size
-            while self._evaluation_bytes > self.evaluation_budget and self._evaluations:
-                oldest = next(iter(self._evaluations))                      # the least recently used
-                self._evaluation_bytes -= self._evaluations.pop(oldest).nbytes + len(oldest[-2]) + len(oldest[-1])
+            self._evaluations.put(key, found)
 
     def close(self) -> None:
         """Forget every row and evaluation kept and keep none from now on (the surfaces of a finished morph still
         hold it)."""
         with self._lock:
-            self._rows.clear()
-            self._bytes = 0
-            self.budget = 0
-            self._evaluations.clear()
-            self._evaluation_bytes = 0
-            self.evaluation_budget = 0
+            self._rows.close()
+            self._evaluations.close()
+
+
+class _Kept:
+    """One table of a :class:`BasisMemo`: its entries by key, the least recently used first, dropped beyond
+    ``budget`` bytes (``size(key, entry)`` each).  Not locked: the memo holds its lock around every call."""
+
+    def __init__(self, budget: int, size: Callable[[tuple, object], int]):
+        self.budget, self._size = budget, size
+        self.entries: dict[tuple, object] = {}
+        self.bytes = 0
+
+    def get(self, key: tuple):
+        """The entry under ``key`` (now the most recently used), or None."""
+        found = self.entries.pop(key, None)
+        if found is not None:
+            self.entries[key] = found                                   # the most recently used last
+        return found
+
+    def put(self, key: tuple, entry) -> None:
+        """Keep ``entry`` under ``key``, the least recently used dropped while the table holds more than its
+        budget."""
+        old = self.entries.pop(key, None)
+        if old is not None:
+            self.bytes -= self._size(key, old)
+        self.entries[key] = entry
+        self.bytes += self._size(key, entry)
+        while self.bytes > self.budget and self.entries:
+            oldest = next(iter(self.entries))                           # the least recently used
+            self.bytes -= self._size(oldest, self.entries.pop(oldest))
+
+    def close(self) -> None:
+        """Forget every entry and keep none from now on."""
+        self.entries.clear()
+        self.bytes = 0
+        self.budget = 0
 
 
 def _size(key: tuple, entry: tuple[int, np.ndarray, list[np.ndarray]]) -> int:
-    """The bytes of one entry: its parameters (the key) and its rows."""
+    """The bytes of one entry of basis rows: its parameters (the key) and its rows."""
     return len(key[-2]) + len(key[-1]) + entry[1].nbytes + sum(v.nbytes for v in entry[2])
+
+
+def _evaluation_size(key: tuple, found: np.ndarray) -> int:
+    """The bytes of one kept evaluation: its parameters (the key) and its rows."""
+    return len(key[-2]) + len(key[-1]) + found.nbytes
 
 
 #: The number of value arrays :func:`_surface_rows` gives for derivatives up to order 0, 1, 2.
