@@ -528,13 +528,18 @@ def test_distances_above_a_limit_are_exact_there_and_at_the_largest(limit):
         assert np.count_nonzero(found != exact) > 1000           # measured: 1570 of 5000 at 1e-3 mm
 
 
-def test_candidate_faces_are_those_of_the_k_nearest_samples():
+@pytest.mark.parametrize("clearance", [1, 3, 48])
+def test_candidate_faces_are_those_of_the_k_nearest_samples(clearance, monkeypatch):
     """``_candidates``: a point's owners are those of its ``k`` nearest samples within ``margin`` of its
     nearest, none beyond ``reach + margin``; the points whose nearest sample is clear of other owners' take
-    its owner alone, as from their ``k`` nearest (samples of two owners at one point included)."""
+    its owner alone, as from their ``k`` nearest (samples of two owners at one point included), however
+    many of a sample's nearest its clearance is looked for among (1: none is clear, every point is asked)."""
     from scipy.spatial import cKDTree
 
+    from hot2cold.pipeline import classify
     from hot2cold.pipeline.classify import _candidates
+
+    monkeypatch.setattr(classify, "CLEARANCE_NEIGHBOURS", clearance)
 
     rng = np.random.default_rng(3)
     for trial in range(40):

@@ -165,15 +165,22 @@ def curve_length(curve) -> float:
     return polyline_length(evaluate_curve(curve, np.linspace(*curve.domain, 33)))
 
 
-def _clearance(tree: cKDTree, owner: np.ndarray, k: int) -> np.ndarray:
-    """Per sample of ``tree`` (``(m,)``, mm): how far at least the nearest sample of another owner lies, the
-    distance to it among the sample's ``k`` nearest, or to the ``k``-th nearest where none of them is
-    another owner's."""
-    dist, idx = query(tree, tree.data, k=k)
-    dist, idx = dist.reshape(tree.n, k), idx.reshape(tree.n, k)
-    other = owner[idx] != owner[:, None]
+#: A sample's clearance (:func:`_clearance`) is looked for among this many of its nearest samples: the
+#: more, the farther it reaches where a face's own samples surround the sample, and the more nodes
+#: :func:`_candidates` finds alone (each node not alone is asked for its ``k`` nearest samples).
+CLEARANCE_NEIGHBOURS = 48
+
+
+def _clearance(tree: cKDTree, owner: np.ndarray, samples: np.ndarray, k: int) -> np.ndarray:
+    """Per sample of ``samples (s,)`` (rows of ``tree``): how far at least (mm, ``(s,)``) the nearest sample of
+    another owner lies, the distance to it among the sample's ``k`` nearest, or to the ``k``-th nearest where
+    none of them is another owner's."""
+    k = min(k, tree.n)
+    dist, idx = query(tree, tree.data[samples], k=k)
+    dist, idx = dist.reshape(len(samples), k), idx.reshape(len(samples), k)
+    other = owner[idx] != owner[samples, None]
     first = other.argmax(axis=1)
-    return np.where(other.any(axis=1), dist[np.arange(tree.n), first], dist[:, -1])
+    return np.where(other.any(axis=1), dist[np.arange(len(samples)), first], dist[:, -1])
 
 
 def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: float, margin: float,
@@ -189,13 +196,16 @@ def _candidates(tree: cKDTree, owner: np.ndarray, points: np.ndarray, reach: flo
     Most points see one owner only, and need not be asked for ``k`` samples: every sample within
     ``d0 + margin`` of a point lies within ``2 d0 + margin`` of its nearest sample, so where that sample's
     :func:`_clearance` is larger, its owner is the point's only one (the same pair as from its ``k``
-    nearest).
+    nearest).  The clearance is found for the samples nearest to some point only (a part of many faces has
+    many more samples than a field of a few thousand nodes has nearest ones).
 
     Returns ``point (c,)`` and ``owner (c,)``, sorted by owner and then point.
     """
     k = min(k, tree.n)
     d0, i0 = query(tree, points)
-    alone = (_clearance(tree, owner, k)[i0] > 2.0 * d0 + margin) & (d0 <= reach + margin)
+    nearest, at = np.unique(i0, return_inverse=True)
+    clearance = _clearance(tree, owner, nearest, CLEARANCE_NEIGHBOURS)[at]
+    alone = (clearance > 2.0 * d0 + margin) & (d0 <= reach + margin)
     one = np.flatnonzero(alone)
     keys = [owner[i0[one]].astype(np.int64) * len(points) + one]
     rest = np.flatnonzero(~alone)
