@@ -307,6 +307,34 @@ def test_jacobi_eigen_decomposition_of_3_by_3_matrices():
     assert np.array_equal(lam[-1], np.zeros(3)) and np.array_equal(v[-1], np.eye(3))
 
 
+@pytest.mark.parametrize("shape", [(1, 20, 3), (30, 21, 3), (4096, 21, 3), (7, 5, 4)])
+def test_row_sums_are_numpy_s_to_the_bit_whatever_the_chunk(shape):
+    """The local fits' sums over a neighbourhood's rows (``einsum``) are numpy's ``sum(axis=1)`` to the bit, and a
+    neighbourhood's sums do not depend on the others asked with it (an estimate is the same alone or in a chunk:
+    the estimator's memo relies on it)."""
+    from hot2cold.core.localfit import _row_sums
+
+    x = RNG.normal(size=shape) * 10.0 ** RNG.integers(-8, 8, size=shape)
+    sums = _row_sums(x)
+    assert np.array_equal(sums, x.sum(axis=1))
+    for i in (0, shape[0] // 2, shape[0] - 1):
+        assert np.array_equal(_row_sums(x[i:i + 1])[0], sums[i])
+
+
+def test_masks_repeat_the_weights_and_give_the_same_products():
+    """A mask multiplies the rows left out by 0 and the others by 1 whatever the width of the last axis (its
+    weights kept per width), the products of a broadcast to the bit; every row valid: the array itself."""
+    from hot2cold.core.localfit import _masked
+
+    valid = RNG.random((40, 9)) > 0.3
+    mask = _masked(valid)
+    for width in (3, 4, 3, 6):
+        x = RNG.normal(size=(40, 9, width))
+        assert np.array_equal(mask(x), x * valid[..., None].astype(float))
+    x = RNG.normal(size=(40, 9, 3))
+    assert _masked(np.ones((40, 9), bool))(x) is x
+
+
 def test_local_fits_over_whole_neighbourhoods_skip_only_the_mask(monkeypatch):
     """Neighbourhoods whose rows are all valid are fitted without multiplying by the mask (a pass over the arrays
     spared): the same numbers as the masked path gives them, and a row left out still counts for nothing."""
