@@ -163,12 +163,10 @@ class Span(NamedTuple):
         shift = _row_sums(offsets) / count[:, None]
         centre = centre + shift
         offsets = mask(offsets - shift[:, None, :])
-        # a neighbourhood that spreads by no more than the rounding of its positions is one point; the scale
-        # is offset_scale's (the largest offset component, 1 where all are 0) from the same pass
+        # a neighbourhood that spreads by no more than the rounding of its positions is one point
         size = np.abs(offsets).max(axis=(1, 2))
-        one_point = size <= _SAME_POINT * np.abs(centre).max(axis=1)
-        offsets[one_point] = 0.0
-        scale = np.where(one_point | (size == 0), 1.0, size)
+        offsets[size <= _SAME_POINT * np.abs(centre).max(axis=1)] = 0.0
+        scale = offset_scale(offsets)
         offsets = offsets / scale[:, None, None]
         u, sigma, vt = thin_svd3(offsets)
         return cls(centre, count, scale, offsets, u, sigma, vt)
