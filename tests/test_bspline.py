@@ -9,11 +9,11 @@ import scipy.sparse
 from OCP.gp import gp_Pnt, gp_Vec
 
 from hot2cold.core.bspline import (BasisMemo, BSplineCurve, BSplineSurface, _span_rows, curve_basis, evaluated,
-                                   curve_derivative_basis, evaluate_curve, evaluate_surface, refine_surface,
+                                   curve_derivative_basis, evaluate_curve, evaluate_surface, fit_curve, refine_surface,
                                    surface_basis, surface_derivative_bases, surface_derivatives, surface_first_jet,
                                    surface_normals)
-from hot2cold.kernel.convert import (curve_to_record, record_to_curve, record_to_surface,
-                                     surface_to_record)
+from hot2cold.kernel.convert import (curve2d_to_record, curve_to_record, record_to_curve, record_to_curve2d,
+                                     record_to_surface, surface_to_record)
 
 RTOL = 1e-12
 
@@ -160,6 +160,42 @@ def test_curve_round_trip_through_kernel(rational):
         np.testing.assert_array_equal(back.weights, rec.weights)
     else:
         assert back.weights is None
+
+
+@pytest.mark.parametrize("p", [1, 3, 5])
+def test_a_fit_on_a_curve_s_own_knots_gives_the_curve_back(p):
+    """``fit_curve`` through points of a non-rational curve, on its knots (C0 and C1 knots among them), with
+    p + 2 parameters in each span: the curve itself, to rounding; its ends exactly the points' ends."""
+    rng = np.random.default_rng(5 + p)
+    curve = random_curve(rng, p, False, n=p + 8)
+    breaks = np.unique(curve.knots)
+    t = np.concatenate([np.linspace(a, b, p + 2) for a, b in zip(breaks[:-1], breaks[1:])])
+    points = evaluate_curve(curve, t)
+    fitted = fit_curve(t, points, curve.knots, p)
+    scale = np.abs(curve.poles).max()
+    assert np.abs(fitted.poles - curve.poles).max() <= 1e-9 * scale
+    assert np.array_equal(fitted.poles[[0, -1]], points[[0, -1]])
+
+
+def test_a_fit_passes_through_the_ends_of_noisy_points_and_refuses_bad_shapes():
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 40)
+    points = np.c_[t, np.sin(3 * t), np.zeros_like(t)] + rng.normal(scale=1e-3, size=(40, 3))
+    knots = np.r_[np.zeros(4), 0.25, 0.5, 0.75, np.ones(4)]
+    fitted = fit_curve(t, points, knots, 3)
+    assert np.array_equal(evaluate_curve(fitted, [0.0, 1.0]), points[[0, -1]])
+    assert np.abs(evaluate_curve(fitted, t) - points).max() < 5e-3       # the noise, not the sine, is left
+    with pytest.raises(ValueError, match=r"points must be \(m, 3\)"):
+        fit_curve(t, points[:, :2], knots, 3)
+
+
+def test_pcurve_round_trip_through_kernel():
+    rng = np.random.default_rng(23)
+    rec = random_curve(rng, 3, False)
+    rec = BSplineCurve(np.c_[rec.poles[:, :2], np.zeros(len(rec.poles))], rec.knots, rec.degree)
+    back = curve2d_to_record(record_to_curve2d(rec))
+    np.testing.assert_array_equal(back.knots, rec.knots)
+    np.testing.assert_array_equal(back.poles, rec.poles)
 
 
 # ------------------------------------------------------------------------------------- basis properties

@@ -343,3 +343,123 @@ def test_arrays_of_reals_are_read_as_any_build_of_ocp_returns_them():
             return array
 
     assert reals(array) == reals(handle) == reals(Handle()) == reals(iter([0.0, 0.5, 1.0])) == [0.0, 0.5, 1.0]
+
+
+def _on_b_splines(solid):
+    """A copy of ``solid`` whose faces that are no plane lie on B-splines approximating their surfaces over the
+    faces' own parameters (to 1e-10 mm), their pcurves and edge curves (circles, ellipses) as they were."""
+    from OCP.Geom import Geom_Plane, Geom_RectangularTrimmedSurface
+    from OCP.GeomAbs import GeomAbs_C2
+    from OCP.GeomConvert import GeomConvert_ApproxSurface
+    from OCP.TopLoc import TopLoc_Location
+    from hot2cold.kernel.conversion import _move_pcurves
+    from hot2cold.kernel.explore import shape_map
+    from OCP.TopAbs import TopAbs_FACE
+
+    copy = BRepBuilderAPI_Copy(solid, True, False).Shape()
+    for face in shape_map(copy, TopAbs_FACE):
+        face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
+        location = TopLoc_Location()
+        surface = BRep_Tool.Surface_s(face, location)
+        if isinstance(surface, Geom_Plane):
+            continue
+        piece = Geom_RectangularTrimmedSurface(surface, *BRepTools.UVBounds_s(face))
+        approx = GeomConvert_ApproxSurface(piece, 1e-10, GeomAbs_C2, GeomAbs_C2, 9, 9, 60, 1)
+        _move_pcurves(face, gp_Vec2d(0.0, 0.0), (approx.Surface(), location))
+    assert BRepCheck_Analyzer(copy).IsValid()
+    return copy
+
+
+def _cylinder():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    return BRepPrimAPI_MakeCylinder(5.0, 20.0).Shape()
+
+
+def _elliptic_prism():
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Elips, gp_Pnt, gp_Vec
+
+    ellipse = BRepBuilderAPI_MakeEdge(gp_Elips(gp_Ax2(gp_Pnt(1.0, 2.0, 0.0), gp_Dir(0.0, 0.0, 1.0)), 12.0, 5.0))
+    base = BRepBuilderAPI_MakeFace(BRepBuilderAPI_MakeWire(ellipse.Edge()).Wire()).Face()
+    return BRepPrimAPI_MakePrism(base, gp_Vec(0.0, 0.0, 20.0)).Shape()
+
+
+@pytest.mark.parametrize("make", [_cylinder, _elliptic_prism])
+def test_a_b_spline_face_along_conics_keeps_its_surface_and_its_pcurves_follow_the_new_curves(make, monkeypatch):
+    """Issue 36: the conversion runs around the B-spline faces it would keep (it would project all their pcurves
+    anew).  A side on a B-spline, bounded by circles or ellipses that become rational B-splines with other
+    parameters, keeps its surface as read, and each pcurve along a conic follows the new curve's foot points
+    on it from the pcurve as read at the conic's parameters: within ``_ALONG_SHARE`` of the edge's tolerance
+    of the new curve (which lies on the side to within 1e-10 mm), at 201 parameters."""
+    from OCP.ElCLib import ElCLib
+    from OCP.Geom import Geom_BSplineSurface, Geom_Circle, Geom_Ellipse
+    from OCP.TopAbs import TopAbs_FACE
+    from hot2cold.kernel import conversion, kept_faces
+    from hot2cold.kernel.explore import edges_of, shape_map
+
+    hot = _on_b_splines(make())
+    along = []
+    follow = kept_faces._pcurve_along
+    monkeypatch.setattr(kept_faces, "_pcurve_along", lambda *a: along.append(a) or follow(*a))
+    converted = conversion.to_bspline(hot)
+    assert BRepCheck_Analyzer(converted).IsValid()
+    assert len(along) == 2, "the side's two conics, each followed once"
+    sides = [(a, b) for a, b in zip(shape_map(hot, TopAbs_FACE), shape_map(converted, TopAbs_FACE))
+             if isinstance(BRep_Tool.Surface_s(a), Geom_BSplineSurface)]
+    assert len(sides) == 1
+    read, side = (TopoDS.Face_s(f.Oriented(TopAbs_FORWARD)) for f in sides[0])
+    s_read, s_new = BRep_Tool.Surface_s(read), BRep_Tool.Surface_s(side)
+    assert s_new.NbUPoles() == s_read.NbUPoles() and s_new.NbVPoles() == s_read.NbVPoles()
+    assert max(s_new.Pole(i, j).Distance(s_read.Pole(i, j)) for i in range(1, s_new.NbUPoles() + 1)
+               for j in range(1, s_new.NbVPoles() + 1)) == 0.0
+    conics = 0
+    for edge_read, edge in zip(edges_of(read), edges_of(side)):
+        conic = BRep_Tool.Curve_s(edge_read, 0.0, 0.0)
+        if not isinstance(conic, (Geom_Circle, Geom_Ellipse)):
+            continue
+        conics += 1
+        shape = conic.Circ() if isinstance(conic, Geom_Circle) else conic.Elips()
+        curve, tolerance = BRep_Tool.Curve_s(edge, 0.0, 0.0), BRep_Tool.Tolerance_s(edge)
+        assert tolerance == BRep_Tool.Tolerance_s(edge_read)
+        pcurve = BRep_Tool.CurveOnSurface_s(edge, side, 0.0, 0.0)
+        first, last = BRep_Tool.Range_s(edge, side)
+        ts = np.linspace(first, last, 201)
+        angles = np.array([ElCLib.Parameter_s(shape, curve.Value(t)) for t in ts])
+        angles += TWO_PI * np.round((ts - angles) / TWO_PI)
+        assert np.ptp(angles - ts) > 1e-3, "the conic kept its parameters: nothing to follow"
+        for t in ts:
+            uv = pcurve.Value(t)
+            gap = s_new.Value(uv.X(), uv.Y()).Distance(curve.Value(t))
+            assert gap <= kept_faces._ALONG_SHARE * tolerance + 1e-9
+    assert conics == 2
+
+
+def test_a_b_spline_face_whose_pcurves_cannot_follow_its_conics_is_converted_with_the_others(monkeypatch, caplog):
+    """No fit within the share of the tolerance (here: no piece count to try): the side is converted with the
+    other faces, as before, and the part is as valid."""
+    import logging
+    from hot2cold.kernel import conversion, kept_faces
+
+    monkeypatch.setattr(kept_faces, "_ALONG_PIECES", ())
+    with caplog.at_level(logging.DEBUG, logger="hot2cold.kernel.kept_faces"):
+        converted = conversion.to_bspline(_on_b_splines(_cylinder()))
+    assert "face 0 converted with the others: no pcurve within" in caplog.text
+    assert BRepCheck_Analyzer(converted).IsValid()
+
+
+def test_the_whole_part_is_converted_at_once_where_converting_around_the_kept_faces_fails(monkeypatch, caplog):
+    """The conversion made another B-spline of a conic than the kept face's pcurves were made to follow (here:
+    said so whatever it made): the whole part is converted at once, as before, and is as valid."""
+    import logging
+    from hot2cold.errors import KernelError
+    from hot2cold.kernel import conversion, kept_faces
+
+    def refuse(*_):
+        raise KernelError("the conversion made another B-spline of a conic")
+
+    monkeypatch.setattr(kept_faces, "_take_spline", refuse)
+    with caplog.at_level(logging.DEBUG, logger="hot2cold.kernel.conversion"):
+        converted = conversion.to_bspline(_on_b_splines(_cylinder()))
+    assert "the whole part converted at once" in caplog.text
+    assert BRepCheck_Analyzer(converted).IsValid()

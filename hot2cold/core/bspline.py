@@ -537,6 +537,25 @@ def curve_basis(curve: BSplineCurve, t) -> _sparse.csr_array:
     return _to_csr(start, vals, curve.n_poles)
 
 
+def fit_curve(t: np.ndarray, points: np.ndarray, knots: np.ndarray, degree: int) -> BSplineCurve:
+    """The non-rational B-spline curve of ``degree`` on the full clamped ``knots`` that passes through the first
+    and last of ``points (m, 3)`` at ``t[0]`` and ``t[-1]`` (the ends of the knots) and fits the others, at
+    ``t (m,)`` in between, by least squares (``numpy.linalg.lstsq``; enough parameters in each knot span to
+    determine its poles are the caller's part)."""
+    t, points, knots = np.asarray(t, float), np.asarray(points, float), np.asarray(knots, float)
+    n = len(knots) - degree - 1
+    if points.shape != (len(t), 3) or n < 2:
+        raise ValueError(f"points must be (m, 3) for t (m,) and knots give at least 2 poles: points "
+                         f"{points.shape}, t {t.shape}, {n} poles")
+    curve = BSplineCurve(np.zeros((n, 3)), knots, degree)
+    basis = curve_basis(curve, t).toarray()                                    # (m, n)
+    poles = np.empty((n, 3))
+    poles[0], poles[-1] = points[0], points[-1]
+    rest = points - basis[:, :1] * poles[0] - basis[:, -1:] * poles[-1]
+    poles[1:-1] = np.linalg.lstsq(basis[1:-1, 1:-1], rest[1:-1], rcond=None)[0]
+    return BSplineCurve(poles, knots, degree)
+
+
 def curve_derivative_basis(curve: BSplineCurve, t, nu: int = 1) -> _sparse.csr_array:
     """Basis of the ``nu``-th derivative ``d^nu C / dt^nu`` of ``curve`` at parameters ``t`` (m,).
 

@@ -6,10 +6,12 @@ its vertices: the premise of eq. 10).
 the normalisation here changes that geometry in place: the part as read stays as read).  On the copy, a face on
 a cylinder, cone, sphere or torus that runs outside the first turn of its surface (u from pi to 3 pi, or from
 -pi to pi) has its surface's frame turned to where it begins (:func:`_turn_to_face`), so that the conversion
-sees it from 0; then every surface and curve is converted, offset surfaces approximated closely
-(:func:`_tighten_offset`), the pcurves as read put back where the conversion kept the parameters of surface and
-curve yet projected them anew (:func:`_keep_pcurves`), and each converted face that the conversion broke
-while the face as read is valid is mended (:mod:`hot2cold.kernel.repair`) or named in a
+sees it from 0; then every surface and curve is converted, the B-spline faces whose surfaces the conversion
+keeps left out of it (:func:`~hot2cold.kernel.kept_faces.convert_around`: it would project all their pcurves
+anew, the most of its time), offset surfaces approximated closely (:func:`_tighten_offset`), the pcurves as read
+put back where the conversion kept the parameters of surface and curve yet projected them anew
+(:func:`_keep_pcurves`; with those faces left out, only where a face could not be), and each converted face that
+the conversion broke while the face as read is valid is mended (:mod:`hot2cold.kernel.repair`) or named in a
 :class:`~hot2cold.errors.KernelError`.  Last, periodic B-splines are brought to the period that holds their
 face (:func:`_into_first_period`) and made non-periodic and clamped.
 """
@@ -22,8 +24,9 @@ import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
 from OCP.BRepTools import BRepTools
-from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurface, Geom_CylindricalSurface,
-                      Geom_Plane, Geom_SphericalSurface, Geom_ToroidalSurface)
+from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurface,
+                      Geom_CylindricalSurface, Geom_Plane, Geom_SphericalSurface,
+                      Geom_ToroidalSurface)
 from OCP.Geom2d import Geom2d_BSplineCurve
 from OCP.gp import gp_Ax3, gp_Dir, gp_Vec2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID
@@ -33,6 +36,7 @@ from OCP.TopoDS import TopoDS, TopoDS_Shape
 from ..errors import KernelError
 from .explore import bspline_curve, bspline_surface, diagonal, edges_of, index_map, reals, shape_map
 from .faults import describe_face, face_faults
+from .kept_faces import convert_around
 from .repair import face_valid, fix_faces, mend_face, pcurve_spline
 
 log = logging.getLogger(__name__)
@@ -43,10 +47,7 @@ TWO_PI = 2 * math.pi
 def to_bspline(shape: TopoDS_Shape) -> TopoDS_Shape:
     """A copy of ``shape`` (a solid or a compound of solids) in normalised B-spline form (see the module); raises
     :class:`KernelError` naming the solid or face the conversion fails on or breaks beyond mending."""
-    copy = BRepBuilderAPI_Copy(shape, True, False).Shape()
-    for k, face in enumerate(shape_map(copy, TopAbs_FACE)):
-        _turn_to_face(face, k)
-    hot = _convert(shape, copy)
+    hot = _convert(shape, _turned_copy(shape))
     for k, face in enumerate(shape_map(hot, TopAbs_FACE)):
         surface = bspline_surface(face)[0]
         _into_first_period(face, surface, k)
@@ -59,28 +60,48 @@ def to_bspline(shape: TopoDS_Shape) -> TopoDS_Shape:
     return hot
 
 
+def _turned_copy(shape: TopoDS_Shape) -> TopoDS_Shape:
+    """A copy of ``shape``, geometry included, with its faces turned to begin at 0 (:func:`_turn_to_face`)."""
+    copy = BRepBuilderAPI_Copy(shape, True, False).Shape()
+    for k, face in enumerate(shape_map(copy, TopAbs_FACE)):
+        _turn_to_face(face, k)
+    return copy
+
+
 def _convert(shape: TopoDS_Shape, copy: TopoDS_Shape) -> TopoDS_Shape:
     """``copy`` (of ``shape``, as read) with every surface and curve in B-spline form
-    (``BRepBuilderAPI_NurbsConvert``), offset surfaces approximated closely and the faces it broke mended; a
-    failure names the solid and face it fails on (each face converted alone to find it), with its surface type
-    and a point on it."""
+    (``BRepBuilderAPI_NurbsConvert``, around the faces it would keep:
+    :func:`~hot2cold.kernel.kept_faces.convert_around`; where that fails, the whole part at once on a new copy),
+    offset surfaces approximated closely and the faces it broke mended; a failure names the solid and face it
+    fails on (:func:`_refuse`)."""
     try:
-        converted = BRepBuilderAPI_NurbsConvert(copy, True).Shape()
-    except Exception as exc:  # Standard_Failure
-        failure = exc
-    else:
-        size = diagonal(shape)
-        faces = shape_map(shape, TopAbs_FACE)
-        converted_faces = shape_map(converted, TopAbs_FACE)
-        for face, converted_face in zip(faces, converted_faces):
-            surface = BRep_Tool.Surface_s(face)
-            if surface.DynamicType().Name() == "Geom_OffsetSurface":
-                _tighten_offset(surface, converted_face, _OFFSET_TOLERANCE * size)
-        kept = [k for k, (face, converted_face) in enumerate(zip(faces, converted_faces))
-                if _keep_pcurves(face, converted_face, _SAME_PARAMETERS * size)]
-        if kept:
-            log.debug("faces that keep their pcurves as read: %s", kept)
-        return _mend(faces, converted, converted_faces, _MEND_TOLERANCE * size)
+        converted = convert_around(copy)
+    except Exception as exc:  # Standard_Failure, KernelError: the whole part converted at once instead
+        log.debug("converting around the kept faces failed (%s): the whole part converted at once", exc)
+        converted, copy = None, _turned_copy(shape)
+    if converted is None:
+        try:
+            converted = BRepBuilderAPI_NurbsConvert(copy, True).Shape()
+        except Exception as exc:  # Standard_Failure
+            _refuse(shape, copy, exc)
+    size = diagonal(shape)
+    faces = shape_map(shape, TopAbs_FACE)
+    converted_faces = shape_map(converted, TopAbs_FACE)
+    for face, converted_face in zip(faces, converted_faces):
+        surface = BRep_Tool.Surface_s(face)
+        if surface.DynamicType().Name() == "Geom_OffsetSurface":
+            _tighten_offset(surface, converted_face, _OFFSET_TOLERANCE * size)
+    kept = [k for k, (face, converted_face) in enumerate(zip(faces, converted_faces))
+            if _keep_pcurves(face, converted_face, _SAME_PARAMETERS * size)]
+    if kept:
+        log.debug("faces that keep their pcurves as read: %s", kept)
+    return _mend(faces, converted, converted_faces, _MEND_TOLERANCE * size)
+
+
+def _refuse(shape: TopoDS_Shape, copy: TopoDS_Shape, failure: Exception) -> None:
+    """Raise :class:`KernelError` for the conversion of ``copy`` (of ``shape``) that failed with ``failure``,
+    naming the solid and face it fails on (each face converted alone to find it), with its surface type and a
+    point on it."""
     names, numbers = shape_map(shape, TopAbs_FACE), index_map(copy, TopAbs_FACE)
     for s, solid in enumerate(shape_map(copy, TopAbs_SOLID)):
         for face in shape_map(solid, TopAbs_FACE):

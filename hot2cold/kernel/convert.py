@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface
 from OCP.Geom2d import Geom2d_BSplineCurve
-from OCP.gp import gp_Pnt, gp_Trsf
-from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array2OfPnt
+from OCP.gp import gp_Pnt, gp_Pnt2d, gp_Trsf
+from OCP.TColgp import TColgp_Array1OfPnt, TColgp_Array1OfPnt2d, TColgp_Array2OfPnt
 from OCP.TColStd import (TColStd_Array1OfInteger, TColStd_Array1OfReal,
                          TColStd_Array2OfReal)
 
@@ -118,6 +118,19 @@ def record_to_curve(rec: BSplineCurve, trsf: gp_Trsf | None = None) -> Geom_BSpl
         return Geom_BSplineCurve(arr, w, kn, mu, rec.degree, False)
     except Exception as exc:  # Standard_ConstructionError and friends
         raise KernelError(f"cannot build a B-spline curve: {exc}") from exc
+
+
+def record_to_curve2d(rec: BSplineCurve) -> Geom2d_BSplineCurve:
+    """A new ``Geom2d_BSplineCurve`` (a pcurve) from a non-rational record whose poles are ``(u, v, 0)``, as
+    :func:`curve2d_to_record` makes them."""
+    arr = TColgp_Array1OfPnt2d(1, rec.n_poles)
+    for i, (u, v, _) in enumerate(rec.poles, start=1):
+        arr.SetValue(i, gp_Pnt2d(float(u), float(v)))
+    kn, mu = _distinct_knots(rec.knots)
+    try:
+        return Geom2d_BSplineCurve(arr, kn, mu, rec.degree, False)
+    except Exception as exc:  # Standard_ConstructionError and friends
+        raise KernelError(f"cannot build a B-spline pcurve: {exc}") from exc
 
 
 def record_to_surface(rec: BSplineSurface, trsf: gp_Trsf | None = None) -> Geom_BSplineSurface:
