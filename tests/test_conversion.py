@@ -463,3 +463,25 @@ def test_the_whole_part_is_converted_at_once_where_converting_around_the_kept_fa
         converted = conversion.to_bspline(_on_b_splines(_cylinder()))
     assert "the whole part converted at once" in caplog.text
     assert BRepCheck_Analyzer(converted).IsValid()
+
+
+def test_an_edge_of_no_face_beside_kept_faces_is_converted_too():
+    """A part that holds an edge of no face (a wire beside the solid, as NIST CTC 02 does) beside a kept face:
+    the edge is converted with the other faces, and every edge of the part comes out a B-spline."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.gp import gp_Pnt
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopoDS import TopoDS_Compound
+    from hot2cold.kernel import conversion
+    from hot2cold.kernel.explore import shape_map
+
+    part = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(part)
+    builder.Add(part, _on_b_splines(_cylinder()))
+    builder.Add(part, BRepBuilderAPI_MakeEdge(gp_Pnt(20.0, 0.0, 0.0), gp_Pnt(30.0, 5.0, 0.0)).Edge())
+    converted = conversion.to_bspline(part)
+    edges = [e for e in shape_map(converted, TopAbs_EDGE) if not BRep_Tool.Degenerated_s(e)]
+    assert len(edges) == 4
+    assert all(isinstance(BRep_Tool.Curve_s(e, 0.0, 0.0), Geom_BSplineCurve) for e in edges)

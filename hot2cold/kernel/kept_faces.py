@@ -23,6 +23,7 @@ from OCP.TColStd import TColStd_Array1OfReal
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_VERTEX
 from OCP.TopLoc import TopLoc_Location
 from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Shape
+from OCP.TopTools import TopTools_IndexedMapOfShape
 
 from ..core.bspline import clip_uv, evaluate_curve, evaluate_surface, fit_curve
 from ..core.footpoint import project_to_surface
@@ -40,10 +41,10 @@ def convert_around(copy: TopoDS_Shape) -> TopoDS_Shape | None:
     """``copy`` converted in place, ``BRepBuilderAPI_NurbsConvert`` run on its faces but those it would keep as
     they are (:func:`_kept`); None if it would keep none (then the whole part is converted at once).
 
-    The faces but the kept ones are converted as a compound, and what the conversion made of them (surfaces,
-    edge curves, pcurves, tolerances) is written into ``copy``'s own faces, edges and vertices.  A kept face's
-    pcurves along edges whose curves keep their parameters are its pcurves as read made B-splines over their
-    edge's range (:func:`~hot2cold.kernel.repair.pcurve_spline`), as
+    The faces but the kept ones (and the edges of no face) are converted as a compound, and what the conversion
+    made of them (surfaces, edge curves, pcurves, tolerances) is written into ``copy``'s own faces, edges and
+    vertices.  A kept face's pcurves along edges whose curves keep their parameters are its pcurves as read made
+    B-splines over their edge's range (:func:`~hot2cold.kernel.repair.pcurve_spline`), as
     :func:`~hot2cold.kernel.conversion._keep_pcurves` would have put them back after the conversion projected
     them; along a conic, which the conversion makes a B-spline with other parameters (:func:`_conic_spline`),
     they follow the new curve (:func:`_pcurve_along`; found before the conversion runs: a face where one cannot
@@ -69,6 +70,13 @@ def convert_around(copy: TopoDS_Shape) -> TopoDS_Shape | None:
     for face, keep in zip(faces, kept):
         if not keep:
             builder.Add(compound, face)
+    on_faces = TopTools_IndexedMapOfShape()
+    for face in faces:
+        for edge in edges_of(face, once=True):
+            on_faces.Add(edge)
+    for edge in shape_map(copy, TopAbs_EDGE):
+        if not on_faces.Contains(edge):             # an edge of no face (a wire in the part): converted too
+            builder.Add(compound, edge)
     conversion = BRepBuilderAPI_NurbsConvert(compound, True)
     if not conversion.IsDone():
         raise KernelError("BRepBuilderAPI_NurbsConvert did not finish")
