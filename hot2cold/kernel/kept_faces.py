@@ -286,7 +286,8 @@ def _pcurve_along(use, face, conic, curve) -> tuple[Geom2d_BSplineCurve, float]:
     As the conversion's own projection does, the pcurve follows the foot points of ``curve`` on the surface;
     they are found by Newton's method (:func:`~hot2cold.core.footpoint.project_to_surface`) from the pcurve as
     read at ``mu(t)``, where the conversion approximates the projection from scratch (the pcurve as read stays
-    where a foot point does not settle and runs off from there), and fitted (:func:`~hot2cold.core.bspline.fit_curve`,
+    where a foot point does not settle and runs off from there, and wherever it lies within a hundredth of the
+    edge's tolerance of the curve), and fitted (:func:`~hot2cold.core.bspline.fit_curve`,
     degree ``_ALONG_DEGREE``) with breakpoints where ``curve``'s spans meet (``mu`` is C1 there), each span cut
     into ``_ALONG_PIECES`` pieces in turn until the fit stays within ``_ALONG_SHARE`` of the edge's tolerance of
     the foot points midway between those it was fitted to; raises :class:`KernelError` if none does, or on a
@@ -318,8 +319,10 @@ def _pcurve_along(use, face, conic, curve) -> tuple[Geom2d_BSplineCurve, float]:
         """(m, 3) rows (u, v, 0) of the foot points of ``curve`` at ``t (m,)``, and (m,) their distances."""
         points = apply_trsf(evaluate_curve(spline, t), into_surface)
         start = clip_uv(record, evaluate_curve(read, mu(t))[:, :2])
-        found = project_to_surface(record, points, start)
         start_gaps = np.linalg.norm(evaluate_surface(record, start[:, 0], start[:, 1]) - points, axis=1)
+        if start_gaps.max() <= _ALONG_SHARE * slack:   # the pcurve as read lies on the curve: no foot points
+            return np.c_[start, np.zeros(len(t))], start_gaps
+        found = project_to_surface(record, points, start)
         # a foot point that did not settle slid along a border of the box to its nearest point there, or ran
         # off along a side the surface shrinks to a point (any u the same point) or got lost: taken if it
         # stayed near its start and is no farther, else the pcurve as read is
@@ -339,9 +342,10 @@ def _pcurve_along(use, face, conic, curve) -> tuple[Geom2d_BSplineCurve, float]:
         knots = np.r_[np.full(degree + 1, first), np.repeat(inner, np.where(np.isin(inner, ends), degree - 1, 1)),
                       np.full(degree + 1, last)]
         t = np.concatenate([np.linspace(a, b, degree + 2)[:-1] for a, b in zip(cuts[:-1], cuts[1:])] + [ends[-1:]])
-        fitted = fit_curve(t, feet(t)[0], knots, degree)
         between = (t[1:] + t[:-1]) / 2                 # midway between the points fitted, where a fit strays
-        uv, gaps = feet(between)
+        uv, gaps = feet(np.r_[t, between])
+        fitted = fit_curve(t, uv[:len(t)], knots, degree)
+        uv, gaps = uv[len(t):], gaps[len(t):]
         on = clip_uv(record, evaluate_curve(fitted, between)[:, :2])
         stray = evaluate_surface(record, on[:, 0], on[:, 1]) - evaluate_surface(record, uv[:, 0], uv[:, 1])
         if np.sqrt(np.einsum("ij,ij->i", stray, stray)).max() <= slack:
