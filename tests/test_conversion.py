@@ -400,8 +400,8 @@ def test_a_b_spline_face_along_conics_keeps_its_surface_and_its_pcurves_follow_t
 
     hot = _on_b_splines(make())
     along = []
-    follow = kept_faces._pcurve_along
-    monkeypatch.setattr(kept_faces, "_pcurve_along", lambda *a: along.append(a) or follow(*a))
+    follow = kept_faces._pcurves_along
+    monkeypatch.setattr(kept_faces, "_pcurves_along", lambda face, uses: along.extend(uses) or follow(face, uses))
     converted = conversion.to_bspline(hot)
     assert BRepCheck_Analyzer(converted).IsValid()
     assert len(along) == 2, "the side's two conics, each followed once"

@@ -47,7 +47,7 @@ def convert_around(copy: TopoDS_Shape) -> TopoDS_Shape | None:
     B-splines over their edge's range (:func:`~hot2cold.kernel.repair.pcurve_spline`), as
     :func:`~hot2cold.kernel.conversion._keep_pcurves` would have put them back after the conversion projected
     them; along a conic, which the conversion makes a B-spline with other parameters (:func:`_conic_spline`),
-    they follow the new curve (:func:`_pcurve_along`; found before the conversion runs: a face where one cannot
+    they follow the new curve (:func:`_pcurves_along`; found before the conversion runs: a face where one cannot
     is converted with the others), and the edge's tolerance grows to the distance between the two where that is
     farther.  Raises what the conversion raises, or :class:`KernelError` where the conversion made another curve
     of a conic than :func:`_conic_spline`."""
@@ -116,10 +116,10 @@ def _uses(edge, face) -> list:
 
 def _pcurves_along_conics(face, k: int, edge_ids, splines: dict) -> dict:
     """Per ``(k, edge number)`` of each edge of ``face`` (face ``k``) along a conic, the pcurves that follow the
-    conic's B-spline (:func:`_pcurve_along`, one per use) and their largest distance; the B-splines made on the
+    conic's B-spline (:func:`_pcurves_along`, one per use) and their largest distance; the B-splines made on the
     way go into ``splines`` by edge number."""
     face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
-    out = {}
+    uses, numbers = [], []
     for edge in edges_of(face, once=True):
         conic = None if BRep_Tool.Degenerated_s(edge) else _raw_curve(edge)
         if not isinstance(conic, _CONICS):
@@ -127,8 +127,13 @@ def _pcurves_along_conics(face, k: int, edge_ids, splines: dict) -> dict:
         number = edge_ids.FindIndex(edge)
         if number not in splines:
             splines[number] = _conic_spline(edge)
-        pcurves, gaps = zip(*(_pcurve_along(use, face, conic, splines[number]) for use in _uses(edge, face)))
-        out[k, number] = (list(pcurves), max(gaps))
+        for use in _uses(edge, face):
+            uses.append((use, conic, splines[number]))
+            numbers.append(number)
+    out = {}
+    for number, (pcurve, gap) in zip(numbers, _pcurves_along(face, uses) if uses else ()):
+        pcurves, gaps = out.get((k, number), ([], 0.0))
+        out[k, number] = (pcurves + [pcurve], max(gaps, gap))
     return out
 
 
@@ -136,7 +141,7 @@ def _kept(face) -> bool:
     """Whether the conversion would keep ``face``'s surface as it is: a B-spline surface with a line or a B-spline
     for each pcurve, whose every edge has a B-spline or a line for its curve (the same points at the same
     parameters once converted), a circle or an ellipse over the pcurves' range (other parameters once converted:
-    the pcurves along it are made anew, :func:`_pcurve_along`), or none (degenerate)."""
+    the pcurves along it are made anew, :func:`_pcurves_along`), or none (degenerate)."""
     if not isinstance(BRep_Tool.Surface_s(face, TopLoc_Location()), Geom_BSplineSurface):
         return False
     face = TopoDS.Face_s(face.Oriented(TopAbs_FORWARD))
@@ -278,76 +283,119 @@ _ALONG_PIECES = (2, 4, 8, 16)
 _ALONG_DEGREE = 7
 
 
-def _pcurve_along(use, face, conic, curve) -> tuple[Geom2d_BSplineCurve, float]:
-    """The pcurve of the oriented edge ``use`` on ``face`` once its curve, the circle or ellipse ``conic`` as read,
-    is the B-spline ``curve`` the conversion makes of it (the same range, other parameters: ``curve(t) =
-    conic(mu(t))``), and the largest distance, between the points fitted, from ``curve`` to the face along it.
+class _Along:
+    """One edge use on a kept face along a conic, the pcurve :func:`_pcurves_along` makes for it: ``use`` the
+    oriented edge, ``conic`` its circle or ellipse as read, ``curve`` the B-spline the conversion makes of it
+    (the same range, other parameters: ``curve(t) = conic(mu(t))``), ``record`` and ``into_surface`` the face's
+    surface and the placement of the edge's curve in its frame."""
+
+    def __init__(self, use, face, conic, curve, record, into_surface):
+        self.first, self.last = BRep_Tool.Range_s(use, face)
+        self.read = curve2d_to_record(pcurve_spline(use, face))
+        self.slack = _ALONG_SHARE * BRep_Tool.Tolerance_s(use)
+        if curve.IsPeriodic():
+            curve = curve.Copy()
+            curve.SetNotPeriodic()
+        self.spline = curve_to_record(curve)
+        frame = (conic.Circ() if isinstance(conic, Geom_Circle) else conic.Elips()).Position()
+        self.frame = [np.array([p.X(), p.Y(), p.Z()]) for p in (frame.Location(), frame.XDirection(),
+                                                                 frame.YDirection())]
+        self.radii = ((conic.Radius(),) * 2 if isinstance(conic, Geom_Circle)
+                      else (conic.MajorRadius(), conic.MinorRadius()))
+        self.record, self.into_surface = record, into_surface
+        knots = np.unique(self.spline.knots)
+        self.ends = np.r_[self.first, knots[(knots > self.first) & (knots < self.last)], self.last]
+
+    def mu(self, t: np.ndarray) -> np.ndarray:
+        """The conic's parameters ``(m,)`` of the new curve's points at ``t (m,)``."""
+        origin, x_axis, y_axis = self.frame
+        offsets = evaluate_curve(self.spline, t) - origin
+        at = np.arctan2(offsets @ y_axis / self.radii[1], offsets @ x_axis / self.radii[0])
+        return at + TWO_PI * np.round((t - at) / TWO_PI)
+
+    def samples(self, pieces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """With each span of the new curve cut into ``pieces``: the knots of the fit, the parameters ``t (m,)``
+        fitted (``_ALONG_DEGREE + 1`` a piece), the curve's points there and midway between them ``(2m - 1, 3)``
+        in the surface's frame, and the pcurve as read at the conic's parameters of those ``(2m - 1, 2)``."""
+        degree = _ALONG_DEGREE
+        cuts = np.concatenate([np.linspace(a, b, pieces + 1)[:-1] for a, b in zip(self.ends[:-1], self.ends[1:])]
+                              + [self.ends[-1:]])
+        inner = cuts[1:-1]            # mu is C1 where the spans meet
+        knots = np.r_[np.full(degree + 1, self.first),
+                      np.repeat(inner, np.where(np.isin(inner, self.ends), degree - 1, 1)),
+                      np.full(degree + 1, self.last)]
+        t = np.concatenate([np.linspace(a, b, degree + 2)[:-1] for a, b in zip(cuts[:-1], cuts[1:])]
+                           + [self.ends[-1:]])
+        at = np.r_[t, (t[1:] + t[:-1]) / 2]          # midway between the points fitted, where a fit strays
+        points = apply_trsf(evaluate_curve(self.spline, at), self.into_surface)
+        return knots, t, points, clip_uv(self.record, evaluate_curve(self.read, self.mu(at))[:, :2])
+
+    def fit(self, knots, t, uv, gaps) -> tuple[Geom2d_BSplineCurve, float] | None:
+        """The fit to the foot points ``uv (2m - 1, 2)`` at :meth:`samples`' parameters, and the largest distance
+        ``gaps`` between; None if it strays farther than its slack between the points fitted."""
+        fitted = fit_curve(t, np.c_[uv[:len(t)], np.zeros(len(t))], knots, _ALONG_DEGREE)
+        between = (t[1:] + t[:-1]) / 2
+        on = clip_uv(self.record, evaluate_curve(fitted, between)[:, :2])
+        feet = uv[len(t):]
+        stray = evaluate_surface(self.record, on[:, 0], on[:, 1]) - evaluate_surface(self.record, feet[:, 0],
+                                                                                       feet[:, 1])
+        if np.sqrt(np.einsum("ij,ij->i", stray, stray)).max() > self.slack:
+            return None
+        return record_to_curve2d(fitted), float(gaps[len(t):].max())
+
+
+def _pcurves_along(face, uses: list) -> list[tuple[Geom2d_BSplineCurve, float]]:
+    """For each ``(use, conic, curve)`` of ``uses`` on ``face``: the pcurve of the oriented edge ``use`` once its
+    curve, the circle or ellipse ``conic`` as read, is the B-spline ``curve`` the conversion makes of it (the
+    same range, other parameters: ``curve(t) = conic(mu(t))``), and the largest distance, between the points
+    fitted, from ``curve`` to the face along it.
 
     As the conversion's own projection does, the pcurve follows the foot points of ``curve`` on the surface;
-    they are found by Newton's method (:func:`~hot2cold.core.footpoint.project_to_surface`) from the pcurve as
-    read at ``mu(t)``, where the conversion approximates the projection from scratch (the pcurve as read stays
-    where a foot point does not settle and runs off from there, and wherever it lies within a hundredth of the
-    edge's tolerance of the curve), and fitted (:func:`~hot2cold.core.bspline.fit_curve`,
-    degree ``_ALONG_DEGREE``) with breakpoints where ``curve``'s spans meet (``mu`` is C1 there), each span cut
-    into ``_ALONG_PIECES`` pieces in turn until the fit stays within ``_ALONG_SHARE`` of the edge's tolerance of
-    the foot points midway between those it was fitted to; raises :class:`KernelError` if none does, or on a
-    periodic surface."""
-    first, last = BRep_Tool.Range_s(use, face)
-    read = curve2d_to_record(pcurve_spline(use, face))
-    face_location, curve_location = TopLoc_Location(), TopLoc_Location()
+    they are found by Newton's method (:func:`~hot2cold.core.footpoint.project_to_surface`, the face's uses at
+    once) from the pcurve as read at ``mu(t)``, where the conversion approximates the projection from scratch
+    (the pcurve as read stays where a foot point does not settle and runs off from there, and where all of a
+    use's lie within a hundredth of the edge's tolerance of the curve), and fitted
+    (:func:`~hot2cold.core.bspline.fit_curve`, degree ``_ALONG_DEGREE``) with breakpoints where ``curve``'s
+    spans meet (``mu`` is C1 there), each span cut into ``_ALONG_PIECES`` pieces in turn until the fit stays
+    within ``_ALONG_SHARE`` of the edge's tolerance of the foot points midway between those it was fitted to;
+    raises :class:`KernelError` if none does, or on a periodic surface."""
+    face_location = TopLoc_Location()
     surface = BRep_Tool.Surface_s(face, face_location)
     if surface.IsUPeriodic() or surface.IsVPeriodic():
         raise KernelError("a periodic surface along a conic")
     record = surface_to_record(surface)
-    BRep_Tool.Curve_s(use, curve_location, 0.0, 0.0)
-    into_surface = face_location.Transformation().Inverted().Multiplied(curve_location.Transformation())
-    if curve.IsPeriodic():
-        curve = curve.Copy()
-        curve.SetNotPeriodic()
-    spline = curve_to_record(curve)
-    frame = (conic.Circ() if isinstance(conic, Geom_Circle) else conic.Elips()).Position()
-    origin, x_axis, y_axis = (np.array([p.X(), p.Y(), p.Z()]) for p in (frame.Location(), frame.XDirection(),
-                                                                         frame.YDirection()))
-    radii = ((conic.Radius(),) * 2 if isinstance(conic, Geom_Circle) else (conic.MajorRadius(), conic.MinorRadius()))
-
-    def mu(t: np.ndarray) -> np.ndarray:
-        offsets = evaluate_curve(spline, t) - origin
-        at = np.arctan2(offsets @ y_axis / radii[1], offsets @ x_axis / radii[0])
-        return at + TWO_PI * np.round((t - at) / TWO_PI)
-
-    def feet(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(m, 3) rows (u, v, 0) of the foot points of ``curve`` at ``t (m,)``, and (m,) their distances."""
-        points = apply_trsf(evaluate_curve(spline, t), into_surface)
-        start = clip_uv(record, evaluate_curve(read, mu(t))[:, :2])
-        start_gaps = np.linalg.norm(evaluate_surface(record, start[:, 0], start[:, 1]) - points, axis=1)
-        if start_gaps.max() <= _ALONG_SHARE * slack:   # the pcurve as read lies on the curve: no foot points
-            return np.c_[start, np.zeros(len(t))], start_gaps
-        found = project_to_surface(record, points, start)
-        # a foot point that did not settle slid along a border of the box to its nearest point there, or ran
-        # off along a side the surface shrinks to a point (any u the same point) or got lost: taken if it
-        # stayed near its start and is no farther, else the pcurve as read is
-        box = np.array(record.domain)
-        near = np.all(np.abs(found.uv - start) <= _ALONG_NEAR * (box[[1, 3]] - box[[0, 2]]), axis=1)
-        take = found.settled | (near & (found.distance <= start_gaps))
-        uv = np.where(take[:, None], found.uv, start)
-        return np.c_[uv, np.zeros(len(t))], np.where(take, found.distance, start_gaps)
-
-    slack = _ALONG_SHARE * BRep_Tool.Tolerance_s(use)
-    degree = _ALONG_DEGREE
-    knots = np.unique(spline.knots)
-    ends = np.r_[first, knots[(knots > first) & (knots < last)], last]    # mu is C1 where the spans meet
+    box = np.array(record.domain)
+    alongs = []
+    for use, conic, curve in uses:
+        curve_location = TopLoc_Location()
+        BRep_Tool.Curve_s(use, curve_location, 0.0, 0.0)
+        into_surface = face_location.Transformation().Inverted().Multiplied(curve_location.Transformation())
+        alongs.append(_Along(use, face, conic, curve, record, into_surface))
+    out = [None] * len(alongs)
     for pieces in _ALONG_PIECES:
-        cuts = np.concatenate([np.linspace(a, b, pieces + 1)[:-1] for a, b in zip(ends[:-1], ends[1:])] + [ends[-1:]])
-        inner = cuts[1:-1]
-        knots = np.r_[np.full(degree + 1, first), np.repeat(inner, np.where(np.isin(inner, ends), degree - 1, 1)),
-                      np.full(degree + 1, last)]
-        t = np.concatenate([np.linspace(a, b, degree + 2)[:-1] for a, b in zip(cuts[:-1], cuts[1:])] + [ends[-1:]])
-        between = (t[1:] + t[:-1]) / 2                 # midway between the points fitted, where a fit strays
-        uv, gaps = feet(np.r_[t, between])
-        fitted = fit_curve(t, uv[:len(t)], knots, degree)
-        uv, gaps = uv[len(t):], gaps[len(t):]
-        on = clip_uv(record, evaluate_curve(fitted, between)[:, :2])
-        stray = evaluate_surface(record, on[:, 0], on[:, 1]) - evaluate_surface(record, uv[:, 0], uv[:, 1])
-        if np.sqrt(np.einsum("ij,ij->i", stray, stray)).max() <= slack:
-            return record_to_curve2d(fitted), float(gaps.max())
-    raise KernelError(f"no pcurve within {slack:.3g} mm of the foot points of a converted conic")
+        todo = [i for i, o in enumerate(out) if o is None]
+        if not todo:
+            return out
+        asked = [alongs[i].samples(pieces) for i in todo]
+        points = np.concatenate([a[2] for a in asked])
+        start = np.concatenate([a[3] for a in asked])
+        start_gaps = np.linalg.norm(evaluate_surface(record, start[:, 0], start[:, 1]) - points, axis=1)
+        sizes = np.cumsum([0] + [len(a[2]) for a in asked])
+        on_curve = np.concatenate([np.full(len(a[2]), start_gaps[b:c].max() <= _ALONG_SHARE * alongs[i].slack)
+                                   for i, a, b, c in zip(todo, asked, sizes[:-1], sizes[1:])])
+        uv, gaps = start.copy(), start_gaps.copy()      # the pcurve as read where it lies on the curve
+        ask = np.flatnonzero(~on_curve)
+        if len(ask):
+            found = project_to_surface(record, points[ask], start[ask])
+            # a foot point that did not settle slid along a border of the box to its nearest point there, or
+            # ran off along a side the surface shrinks to a point (any u the same point) or got lost: taken if
+            # it stayed near its start and is no farther, else the pcurve as read is
+            near = np.all(np.abs(found.uv - start[ask]) <= _ALONG_NEAR * (box[[1, 3]] - box[[0, 2]]), axis=1)
+            take = found.settled | (near & (found.distance <= start_gaps[ask]))
+            uv[ask[take]], gaps[ask[take]] = found.uv[take], found.distance[take]
+        for i, (knots, t, _, _), b, c in zip(todo, asked, sizes[:-1], sizes[1:]):
+            out[i] = alongs[i].fit(knots, t, uv[b:c], gaps[b:c])
+    if any(o is None for o in out):
+        slack = min(alongs[i].slack for i, o in enumerate(out) if o is None)
+        raise KernelError(f"no pcurve within {slack:.3g} mm of the foot points of a converted conic")
+    return out
