@@ -96,7 +96,8 @@ def convert_around(copy: TopoDS_Shape) -> TopoDS_Shape | None:
             tolerance = BRep_Tool.Tolerance_s(edge)
             if (k, number) in along:
                 pcurves, gap = along[k, number]
-                tolerance = max(tolerance, _TOLERANCE_MARGIN * gap)     # the curve farther: the edge says so
+                if gap > tolerance:                 # the curve lies farther from the face: the edge says so
+                    tolerance = _TOLERANCE_MARGIN * gap
             else:
                 pcurves = [pcurve_spline(use, face) for use in _uses(edge, face)]
             builder.UpdateEdge(forward, *pcurves, face, tolerance)
@@ -152,7 +153,7 @@ def _kept(face) -> bool:
         if BRep_Tool.Degenerated_s(edge):
             continue
         curve = _basis(BRep_Tool.Curve_s(edge, 0.0, 0.0))
-        if isinstance(curve, _CONICS):           # its pcurve composed with the conic's new parameters
+        if isinstance(curve, _CONICS):           # its pcurves follow the conic's B-spline: ranges to match
             if not (BRep_Tool.SameRange_s(edge) and BRep_Tool.SameParameter_s(edge)
                     and BRep_Tool.Range_s(edge, face) == BRep_Tool.Range_s(edge)):
                 return False
