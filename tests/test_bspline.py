@@ -189,13 +189,18 @@ def test_a_fit_passes_through_the_ends_of_noisy_points_and_refuses_bad_shapes():
         fit_curve(t, points[:, :2], knots, 3)
 
 
-def test_pcurve_round_trip_through_kernel():
-    rng = np.random.default_rng(23)
-    rec = random_curve(rng, 3, False)
-    rec = BSplineCurve(np.c_[rec.poles[:, :2], np.zeros(len(rec.poles))], rec.knots, rec.degree)
+@pytest.mark.parametrize("rational", [False, True])
+def test_pcurve_round_trip_through_kernel(rational):
+    rng = np.random.default_rng(23 + rational)
+    rec = random_curve(rng, 3, rational)
+    rec = BSplineCurve(np.c_[rec.poles[:, :2], np.zeros(len(rec.poles))], rec.knots, rec.degree, rec.weights)
     back = curve2d_to_record(record_to_curve2d(rec))
     np.testing.assert_array_equal(back.knots, rec.knots)
     np.testing.assert_array_equal(back.poles, rec.poles)
+    if rational:
+        np.testing.assert_array_equal(back.weights, rec.weights)
+    else:
+        assert back.weights is None
 
 
 # ------------------------------------------------------------------------------------- basis properties

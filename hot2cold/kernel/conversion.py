@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import NoReturn
 
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
 from OCP.BRepTools import BRepTools
-from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurface,
-                      Geom_CylindricalSurface, Geom_Plane, Geom_SphericalSurface,
-                      Geom_ToroidalSurface)
+from OCP.Geom import (Geom_BSplineCurve, Geom_BSplineSurface, Geom_ConicalSurface, Geom_CylindricalSurface,
+                      Geom_Plane, Geom_SphericalSurface, Geom_ToroidalSurface)
 from OCP.Geom2d import Geom2d_BSplineCurve
 from OCP.gp import gp_Ax3, gp_Dir, gp_Vec2d
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_FORWARD, TopAbs_REVERSED, TopAbs_SOLID
@@ -98,7 +98,7 @@ def _convert(shape: TopoDS_Shape, copy: TopoDS_Shape) -> TopoDS_Shape:
     return _mend(faces, converted, converted_faces, _MEND_TOLERANCE * size)
 
 
-def _refuse(shape: TopoDS_Shape, copy: TopoDS_Shape, failure: Exception) -> None:
+def _refuse(shape: TopoDS_Shape, copy: TopoDS_Shape, failure: Exception) -> NoReturn:
     """Raise :class:`KernelError` for the conversion of ``copy`` (of ``shape``) that failed with ``failure``,
     naming the solid and face it fails on (each face converted alone to find it), with its surface type and a
     point on it."""

@@ -121,14 +121,19 @@ def record_to_curve(rec: BSplineCurve, trsf: gp_Trsf | None = None) -> Geom_BSpl
 
 
 def record_to_curve2d(rec: BSplineCurve) -> Geom2d_BSplineCurve:
-    """A new ``Geom2d_BSplineCurve`` (a pcurve) from a non-rational record whose poles are ``(u, v, 0)``, as
+    """A new ``Geom2d_BSplineCurve`` (a pcurve) from a record whose poles are ``(u, v, 0)``, as
     :func:`curve2d_to_record` makes them."""
     arr = TColgp_Array1OfPnt2d(1, rec.n_poles)
     for i, (u, v, _) in enumerate(rec.poles, start=1):
         arr.SetValue(i, gp_Pnt2d(float(u), float(v)))
     kn, mu = _distinct_knots(rec.knots)
     try:
-        return Geom2d_BSplineCurve(arr, kn, mu, rec.degree, False)
+        if rec.weights is None:
+            return Geom2d_BSplineCurve(arr, kn, mu, rec.degree, False)
+        w = TColStd_Array1OfReal(1, rec.n_poles)
+        for i, x in enumerate(rec.weights, start=1):
+            w.SetValue(i, float(x))
+        return Geom2d_BSplineCurve(arr, w, kn, mu, rec.degree, False)
     except Exception as exc:  # Standard_ConstructionError and friends
         raise KernelError(f"cannot build a B-spline pcurve: {exc}") from exc
 
