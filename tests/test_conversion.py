@@ -386,12 +386,14 @@ def _elliptic_prism():
 
 
 @pytest.mark.parametrize("make", [_cylinder, _elliptic_prism])
-def test_a_b_spline_face_along_conics_keeps_its_surface_and_its_pcurves_follow_the_new_curves(make, monkeypatch):
+def test_a_b_spline_face_along_conics_keeps_its_surface_and_its_pcurves_follow_the_new_curves(make, monkeypatch,
+                                                                                               caplog):
     """Issue 36: the conversion runs around the B-spline faces it would keep (it would project all their pcurves
     anew).  A side on a B-spline, bounded by circles or ellipses that become rational B-splines with other
     parameters, keeps its surface as read, and each pcurve along a conic follows the new curve's foot points
     on it from the pcurve as read at the conic's parameters: within ``_ALONG_SHARE`` of the edge's tolerance
     of the new curve (which lies on the side to within 1e-10 mm), at 201 parameters."""
+    import logging
     from OCP.ElCLib import ElCLib
     from OCP.Geom import Geom_BSplineSurface, Geom_Circle, Geom_Ellipse
     from OCP.TopAbs import TopAbs_FACE
@@ -402,9 +404,11 @@ def test_a_b_spline_face_along_conics_keeps_its_surface_and_its_pcurves_follow_t
     along = []
     follow = kept_faces._pcurves_along
     monkeypatch.setattr(kept_faces, "_pcurves_along", lambda face, uses: along.extend(uses) or follow(face, uses))
-    converted = conversion.to_bspline(hot)
+    with caplog.at_level(logging.DEBUG, logger="hot2cold.kernel"):
+        converted = conversion.to_bspline(hot)
     assert BRepCheck_Analyzer(converted).IsValid()
     assert len(along) == 2, "the side's two conics, each followed once"
+    assert "with the others" not in caplog.text and "at once" not in caplog.text, "the side was not kept"
     sides = [(a, b) for a, b in zip(shape_map(hot, TopAbs_FACE), shape_map(converted, TopAbs_FACE))
              if isinstance(BRep_Tool.Surface_s(a), Geom_BSplineSurface)]
     assert len(sides) == 1
