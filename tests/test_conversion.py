@@ -489,3 +489,25 @@ def test_an_edge_of_no_face_beside_kept_faces_is_converted_too():
     edges = [e for e in shape_map(converted, TopAbs_EDGE) if not BRep_Tool.Degenerated_s(e)]
     assert len(edges) == 4
     assert all(isinstance(BRep_Tool.Curve_s(e, 0.0, 0.0), Geom_BSplineCurve) for e in edges)
+
+
+def test_the_conversion_benchmark_measures_both_ways_on_a_part_with_kept_faces():
+    """``benchmarks/conversion.py`` on the twisted blade (4 B-spline faces of 6): both ways valid, every B-spline
+    face kept, and the gap of every edge within its tolerance; a face whose pcurves are moved 0.3 mm off its edges
+    shows."""
+    from OCP.Geom import Geom_Plane
+    from OCP.TopAbs import TopAbs_FACE
+    from conftest import SAMPLES, benchmark_module
+    from hot2cold.kernel.conversion import _move_pcurves
+    from hot2cold.kernel.explore import shape_map
+
+    with benchmark_module("conversion") as bench:
+        row = bench.measure(SAMPLES / "twisted_blade.step", repeat=1)
+        assert (row["faces"], row["bspline_faces"], row["kept"]) == (6, 4, 4)
+        assert row["around_valid"] and row["whole_valid"]
+        assert row["around_gap"] <= 1.0 and row["whole_gap"] <= 1.0
+        moved = _on_b_splines(_cylinder())
+        assert bench.worst_gap(moved) <= 1.0
+        side = [f for f in shape_map(moved, TopAbs_FACE) if not isinstance(BRep_Tool.Surface_s(f), Geom_Plane)]
+        _move_pcurves(side[0], gp_Vec2d(0.0, 0.3))
+        assert bench.worst_gap(moved) > 1.0
