@@ -108,16 +108,7 @@ def record_to_curve(rec: BSplineCurve, trsf: gp_Trsf | None = None) -> Geom_BSpl
     arr = TColgp_Array1OfPnt(1, rec.n_poles)
     for i, p in enumerate(poles, start=1):
         arr.SetValue(i, gp_Pnt(*p))
-    kn, mu = _distinct_knots(rec.knots)
-    try:
-        if rec.weights is None:
-            return Geom_BSplineCurve(arr, kn, mu, rec.degree, False)
-        w = TColStd_Array1OfReal(1, rec.n_poles)
-        for i, x in enumerate(rec.weights, start=1):
-            w.SetValue(i, float(x))
-        return Geom_BSplineCurve(arr, w, kn, mu, rec.degree, False)
-    except Exception as exc:  # Standard_ConstructionError and friends
-        raise KernelError(f"cannot build a B-spline curve: {exc}") from exc
+    return _curve(Geom_BSplineCurve, arr, rec, "curve")
 
 
 def record_to_curve2d(rec: BSplineCurve) -> Geom2d_BSplineCurve:
@@ -126,16 +117,22 @@ def record_to_curve2d(rec: BSplineCurve) -> Geom2d_BSplineCurve:
     arr = TColgp_Array1OfPnt2d(1, rec.n_poles)
     for i, (u, v, _) in enumerate(rec.poles, start=1):
         arr.SetValue(i, gp_Pnt2d(float(u), float(v)))
+    return _curve(Geom2d_BSplineCurve, arr, rec, "pcurve")
+
+
+def _curve(kind, poles, rec: BSplineCurve, what: str):
+    """A new ``kind`` (``Geom_BSplineCurve`` or ``Geom2d_BSplineCurve``) on the kernel array ``poles`` with the
+    knots, degree and weights of ``rec``; a failure is a :class:`KernelError` naming ``what`` it builds."""
     kn, mu = _distinct_knots(rec.knots)
     try:
         if rec.weights is None:
-            return Geom2d_BSplineCurve(arr, kn, mu, rec.degree, False)
+            return kind(poles, kn, mu, rec.degree, False)
         w = TColStd_Array1OfReal(1, rec.n_poles)
         for i, x in enumerate(rec.weights, start=1):
             w.SetValue(i, float(x))
-        return Geom2d_BSplineCurve(arr, w, kn, mu, rec.degree, False)
+        return kind(poles, w, kn, mu, rec.degree, False)
     except Exception as exc:  # Standard_ConstructionError and friends
-        raise KernelError(f"cannot build a B-spline pcurve: {exc}") from exc
+        raise KernelError(f"cannot build a B-spline {what}: {exc}") from exc
 
 
 def record_to_surface(rec: BSplineSurface, trsf: gp_Trsf | None = None) -> Geom_BSplineSurface:
