@@ -615,6 +615,25 @@ def test_closing_pairs_lists_only_the_pairs_of_cells_whose_moves_differ():
         assert count >= 20 and closing_pairs(hot2, cold2, 1.0) == count
 
 
+def test_the_estimate_at_the_nodes_and_left_out_come_from_one_query_as_from_two():
+    """``at_own`` gives at the nodes what the estimate and ``left_out`` give there one by one (its one query of
+    each node's k + 1 nearest serves both): bit for bit, on nodes with duplicates, over several chunks, and on
+    node sets too small for a fit (the nearest other's displacement)."""
+    rng = np.random.default_rng(11)
+    uv = rng.uniform(0.0, 40.0, (3000, 2))
+    points = np.column_stack([uv, 0.01 * uv[:, 0] ** 2])
+    points = np.concatenate([points, points[:30]])                     # 30 nodes twice
+    field = np.column_stack([1e-3 * points[:, 0] ** 2, np.sin(points[:, 1]), 1e-4 * points[:, 0] * points[:, 1]])
+    rows = np.concatenate([np.arange(0, 3030, 3), np.arange(30)])
+    for n, neighbours in ((3030, 20), (3030, 9), (6, 20), (4, 20), (3, 20)):
+        estimate = FieldEstimator(points[:n], field[:n], neighbours)
+        asked = rows[rows < n]
+        own, left_out = estimate.at_own(asked, chunk=256)
+        assert own.shape == left_out.shape == (len(asked), 3)
+        assert np.array_equal(own, estimate(points[asked]))
+        assert np.array_equal(left_out, estimate.left_out(asked))
+
+
 def test_the_left_out_estimate_tells_how_well_the_nodes_know_the_field():
     """Left out in turn, nodes on a smooth field are predicted by the others to within the estimate's
     truncation; across a thermal front narrower than the nodes' spacing they are not, by more than the

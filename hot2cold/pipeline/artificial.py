@@ -139,32 +139,36 @@ class FieldEstimator:
             return self._disp[np.atleast_1d(idx)].reshape(x.shape)
         for start in range(0, len(x), chunk):
             xs = x[start:start + chunk]
-            dist, idx = self._tree.query(xs, k=self._k)
-            # the fit over the k nearest, where the wide fits below do not take its place: a point far out
-            # (an artificial node over a face's trimmed-away part) has both its fits from the wide balls
-            wide_linear = LINEAR_REACH * dist[:, 0] > dist[:, -1]
-            far, near = np.flatnonzero(wide_linear), np.flatnonzero(~wide_linear)
-            linear, correction = np.zeros((len(xs), 3)), np.zeros((len(xs), 3))
-            trust, flat = np.zeros(len(xs)), np.zeros(len(xs), bool)
-            if len(near):
-                linear[near], correction[near], trust[near], flat[near] = fits_at(
-                    self._points[idx[near]], self._disp[idx[near]], np.ones((len(near), self._k), bool), xs[near],
-                    self._quadratic, OFF_SPAN)
-            quadratic = linear + correction
-            if len(far):
-                wide, valid = self._wide(xs[far], LINEAR_REACH * dist[far, 0])
-                fit = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False, OFF_SPAN)
-                linear[far], flat[far] = fit.linear, fit.off_span
-            far = np.nonzero(REACH * dist[:, 0] > dist[:, -1])[0]
-            if self._quadratic and len(far):
-                wide, valid = self._wide(xs[far], REACH * dist[far, 0])
-                base, correction, trust[far], _ = fits_at(self._points[wide], self._disp[wide], valid, xs[far],
-                                                          True)
-                quadratic[far] = base + correction
-            out[start:start + chunk] = linear + trust[:, None] * (quadratic - linear)
-            flat = np.flatnonzero(flat)
-            if len(flat):
-                out[start + flat] = self._spanning(xs[flat])
+            out[start:start + chunk] = self._estimate(xs, *self._tree.query(xs, k=self._k))
+        return out
+
+    def _estimate(self, xs: np.ndarray, dist: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """:meth:`__call__`'s estimates ``(c, 3)`` at ``xs (c, 3)`` from their ``k`` nearest foot points (``dist``,
+        ``idx``, each ``(c, k)``, nearest first)."""
+        # the fit over the k nearest, where the wide fits below do not take its place: a point far out
+        # (an artificial node over a face's trimmed-away part) has both its fits from the wide balls
+        wide_linear = LINEAR_REACH * dist[:, 0] > dist[:, -1]
+        far, near = np.flatnonzero(wide_linear), np.flatnonzero(~wide_linear)
+        linear, correction = np.zeros((len(xs), 3)), np.zeros((len(xs), 3))
+        trust, flat = np.zeros(len(xs)), np.zeros(len(xs), bool)
+        if len(near):
+            linear[near], correction[near], trust[near], flat[near] = fits_at(
+                self._points[idx[near]], self._disp[idx[near]], np.ones((len(near), idx.shape[1]), bool), xs[near],
+                self._quadratic, OFF_SPAN)
+        quadratic = linear + correction
+        if len(far):
+            wide, valid = self._wide(xs[far], LINEAR_REACH * dist[far, 0])
+            fit = fits_at(self._points[wide], self._disp[wide], valid, xs[far], False, OFF_SPAN)
+            linear[far], flat[far] = fit.linear, fit.off_span
+        far = np.nonzero(REACH * dist[:, 0] > dist[:, -1])[0]
+        if self._quadratic and len(far):
+            wide, valid = self._wide(xs[far], REACH * dist[far, 0])
+            base, correction, trust[far], _ = fits_at(self._points[wide], self._disp[wide], valid, xs[far], True)
+            quadratic[far] = base + correction
+        out = linear + trust[:, None] * (quadratic - linear)
+        flat = np.flatnonzero(flat)
+        if len(flat):
+            out[flat] = self._spanning(xs[flat])
         return out
 
     def remembered(self, x: np.ndarray) -> np.ndarray:
@@ -189,21 +193,48 @@ class FieldEstimator:
         a node's spacing from the nodes: little where the field is smooth at that scale, much where it changes
         faster than the nodes resolve (a sharp thermal front, a kink) or scatters."""
         rows = np.asarray(rows, int)
-        out = np.empty((len(rows), 3))
-        if len(rows) == 0:
-            return out
         k = min(self._k + 1, len(self._points))
-        if k < 5:                       # too few others for a linear fit: the nearest other's displacement
-            _, idx = self._tree.query(self._points[rows], k=min(2, len(self._points)))
-            return self._disp[np.reshape(idx, (len(rows), -1))[:, -1]]
+        if len(rows) == 0 or k < 5:
+            return self._nearest_other(rows)
+        out = np.empty((len(rows), 3))
         for start in range(0, len(rows), chunk):
             these = rows[start:start + chunk]
-            _, idx = self._tree.query(self._points[these], k=k)
-            valid = idx != these[:, None]
-            valid[valid.all(axis=1), -1] = False        # a duplicate point took its place: drop the farthest
-            fit = fits_at(self._points[idx], self._disp[idx], valid, self._points[these], self._quadratic)
-            out[start:start + chunk] = fit.linear + fit.trust[:, None] * fit.correction
+            out[start:start + chunk] = self._left_out_fit(these, self._tree.query(self._points[these], k=k)[1])
         return out
+
+    def at_own(self, rows: np.ndarray, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+        """At the foot points ``rows (m,)`` (indices into ``points``): the estimates ``(m, 3)`` that
+        :meth:`__call__` gives there (the point among its ``k`` nearest) and those of :meth:`left_out` ``(m,
+        3)``, the same numbers from one query of each point's ``k + 1`` nearest (the refinement asks both of
+        the same nodes), ``chunk`` rows at a time."""
+        rows = np.asarray(rows, int)
+        k = min(self._k + 1, len(self._points))
+        if len(rows) == 0 or k < 5:
+            return self(self._points[rows]).reshape(-1, 3), self._nearest_other(rows)
+        own, out = np.empty((len(rows), 3)), np.empty((len(rows), 3))
+        for start in range(0, len(rows), chunk):
+            these = rows[start:start + chunk]
+            x = self._points[these]
+            dist, idx = self._tree.query(x, k=k)
+            own[start:start + chunk] = self._estimate(x, dist[:, :self._k], idx[:, :self._k])
+            out[start:start + chunk] = self._left_out_fit(these, idx)
+        return own, out
+
+    def _nearest_other(self, rows: np.ndarray) -> np.ndarray:
+        """:meth:`left_out` where there are too few others for a linear fit: the displacements ``(m, 3)`` of the
+        nearest other foot point of each of ``rows (m,)``."""
+        if len(rows) == 0:
+            return np.empty((0, 3))
+        _, idx = self._tree.query(self._points[rows], k=min(2, len(self._points)))
+        return self._disp[np.reshape(idx, (len(rows), -1))[:, -1]]
+
+    def _left_out_fit(self, rows: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """:meth:`left_out`'s estimates ``(m, 3)`` at ``rows (m,)`` from their nearest foot points ``idx (m, k)``
+        (the point itself among them)."""
+        valid = idx != rows[:, None]
+        valid[valid.all(axis=1), -1] = False        # a duplicate point took its place: drop the farthest
+        fit = fits_at(self._points[idx], self._disp[idx], valid, self._points[rows], self._quadratic)
+        return fit.linear + fit.trust[:, None] * fit.correction
 
     def _spanning(self, x: np.ndarray) -> np.ndarray:
         """Estimates ``(m, 3)`` at points ``x (m, 3)`` that lie off the plane or line of their neighbourhood, the

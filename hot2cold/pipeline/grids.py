@@ -170,22 +170,19 @@ class _FaceNodes:
         closest = closest.reshape(len(points), -1)
         asked, at = np.unique(closest, return_inverse=True)
         at = at.reshape(closest.shape)
-        return self.misses(asked)[at].max(axis=1), self.left_out_misses(asked)[at].max(axis=1)
+        misses, left_out = self.misses(asked)
+        return misses[at].max(axis=1), left_out[at].max(axis=1)
 
-    def misses(self, asked: np.ndarray) -> np.ndarray:
-        """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``)."""
+    def misses(self, asked: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``), ``(m,)``,
+        and how far it misses them with each left out of it ``(m,)``
+        (:meth:`~hot2cold.pipeline.artificial.FieldEstimator.at_own`)."""
         new = asked[np.isnan(self._misses[asked])]
         if len(new):
-            self._misses[new] = np.linalg.norm(self.local(self._foot[new]) - self._displacements[new], axis=1)
-        return self._misses[asked]
-
-    def left_out_misses(self, asked: np.ndarray) -> np.ndarray:
-        """How far (mm) ``local`` misses the displacements of the nodes ``asked`` (positions in ``nodes``), each
-        left out of it (:meth:`~hot2cold.pipeline.artificial.FieldEstimator.left_out`)."""
-        new = asked[np.isnan(self._left_out[asked])]
-        if len(new):
-            self._left_out[new] = np.linalg.norm(self.local.left_out(new) - self._displacements[new], axis=1)
-        return self._left_out[asked]
+            own, left_out = self.local.at_own(new)
+            self._misses[new] = np.linalg.norm(own - self._displacements[new], axis=1)
+            self._left_out[new] = np.linalg.norm(left_out - self._displacements[new], axis=1)
+        return self._misses[asked], self._left_out[asked]
 
 
 class FaceNodes:
