@@ -617,8 +617,10 @@ def test_closing_pairs_lists_only_the_pairs_of_cells_whose_moves_differ():
 
 def test_the_estimate_at_the_nodes_and_left_out_come_from_one_query_as_from_two():
     """``at_own`` gives at the nodes what the estimate and ``left_out`` give there one by one (its one query of
-    each node's k + 1 nearest serves both): bit for bit, on nodes with duplicates, over several chunks, and on
-    node sets too small for a fit (the nearest other's displacement)."""
+    each node's k + 1 nearest serves both): the same neighbourhoods, so the same numbers to rounding (another
+    neighbourhood, the node left in or out or one more, moves an estimate of this field by 1e-2 in the median), on
+    nodes with duplicates, over several chunks, and on node sets too small for a fit (the nearest other's
+    displacement)."""
     rng = np.random.default_rng(11)
     uv = rng.uniform(0.0, 40.0, (3000, 2))
     points = np.column_stack([uv, 0.01 * uv[:, 0] ** 2])
@@ -630,8 +632,9 @@ def test_the_estimate_at_the_nodes_and_left_out_come_from_one_query_as_from_two(
         asked = rows[rows < n]
         own, left_out = estimate.at_own(asked, chunk=256)
         assert own.shape == left_out.shape == (len(asked), 3)
-        assert np.array_equal(own, estimate(points[asked]))
-        assert np.array_equal(left_out, estimate.left_out(asked))
+        rounding = 1e-12 * np.abs(field).max()
+        np.testing.assert_allclose(own, estimate(points[asked]), rtol=0.0, atol=rounding)
+        np.testing.assert_allclose(left_out, estimate.left_out(asked), rtol=0.0, atol=rounding)
 
 
 def test_the_left_out_estimate_tells_how_well_the_nodes_know_the_field():
