@@ -168,12 +168,13 @@ class DomainRaster:
         finite = np.isfinite(cu) & np.isfinite(cv)
         # Up to one cell outside the box: the border cell decides (it is UNSURE where the boundary runs on
         # the box's edge, and the point the kernel's: on a periodic surface it takes the point into the period,
-        # so a point just across a seam may be inside); farther out: outside.
+        # so a point just across a seam may be inside); farther out: outside.  A point on the box's far sides
+        # (u = u1 or v = v1, where grids over the box end) lies in its last cell, which decides it as any other.
         near = np.flatnonzero(finite & (cu >= -1) & (cu < n + 1) & (cv >= -1) & (cv < n + 1))
         i = np.clip(np.floor(cu[near]).astype(int), 0, n - 1)
         j = np.clip(np.floor(cv[near]).astype(int), 0, n - 1)
         state = self.state[i, j]
-        beyond = (cu[near] < 0) | (cu[near] >= n) | (cv[near] < 0) | (cv[near] >= n)
+        beyond = (cu[near] < 0) | (cu[near] > n) | (cv[near] < 0) | (cv[near] > n)
         state = np.where(beyond & (state != Trim.UNSURE), Trim.OUTSIDE, state)
         walk = np.flatnonzero((state == Trim.UNSURE) & ~beyond & ~self.kernel[i, j])
         if len(walk):
