@@ -518,6 +518,7 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
     from hot2cold.kernel.project import Projector
     from hot2cold.pipeline.grids import FaceGrid
     from hot2cold.pipeline.context import MorphContext
+    from hot2cold.pipeline.distance import Allowance
 
     shape, nodes = blade_1mm
     result = morph(shape, (nodes, _bend(2e-4)(nodes)))
@@ -537,6 +538,13 @@ def test_the_g1_steps_keep_an_edge_or_face_fit_they_would_take_off_the_field(bla
         assert bool(why) == refused and (not refused or why.startswith(f"turning edge {e} would take it 0.00"))
         why = context.distances.moved_off(k, surface, surface.with_poles(surface.poles + shift * normal), grid)
         assert bool(why) == refused and (not refused or why.startswith(f"turning face {k} would take it 0.00"))
+    # the verdicts are kept by the surfaces' content, the grid and the allowance: asked again of surfaces made
+    # anew (other objects), the same; under a wider allowance, the other
+    moved = surface.with_poles(surface.poles + 5e-3 * normal)
+    anew = surface.with_poles(surface.poles.copy()), moved.with_poles(moved.poles.copy())
+    again = context.distances.moved_off(k, *anew, grid)
+    assert again.startswith(f"turning face {k} would take it 0.00")
+    assert context.distances.moved_off(k, surface, moved, grid, Allowance("turning", 10.0)) == ""
 
 
 @pytest.mark.heavy

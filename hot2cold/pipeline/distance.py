@@ -3,8 +3,9 @@
 G1, G2 and the refinement for G1 replace fits by corrected ones (turned, bent, refined); a correction is taken
 only where it leaves the fit within reach of the field (its nodes' cold targets, eq. 21, and the field's
 estimate between them): :meth:`FieldDistance.moved_off` says why not where it does not.  The distances are
-cached per (face, surface's content, grid): G1 and G2 ask for a face's plain fit against every trial, and G1's
-refinement trials correct the faces away from the refined ones again into the same surfaces (other objects).
+cached per (face, surface's content, grid), and so are the verdicts of :meth:`FieldDistance.moved_off`: G1 and G2 ask
+for a face's plain fit against every trial, and G1's refinement trials correct the faces away from the refined ones
+again into the same surfaces (other objects).
 """
 from __future__ import annotations
 
@@ -73,6 +74,9 @@ class FieldDistance:
     #: The parameters where :meth:`distance` found the distances of a fit a correction may replace (by the same
     #: keys), for :meth:`_bound`; only for those, since each holds a pair per node.
     _feet: dict = dataclass_field(default_factory=dict, repr=False)
+    #: :meth:`moved_off`'s answer for each (face, the two surfaces' digests, grid, allowance) asked: G1's rounds
+    #: and refinement trials ask again of the faces they leave as they were.
+    _verdicts: dict = dataclass_field(default_factory=dict, repr=False)
 
     def on(self, part: Part) -> FieldDistance:
         """This record on ``part`` (a refined part: the same faces and parameters), its caches shared."""
@@ -125,6 +129,14 @@ class FieldDistance:
         its nodes; a refined fillet without nodes went far off the exact cold geometry.)"""
         if self.tolerance is None:
             return ""
+        key = (k, before.digest(), after.digest(), grid, allowance)
+        if key not in self._verdicts:
+            self._verdicts[key] = self._moved_off(k, before, after, grid, allowance)
+        return self._verdicts[key]
+
+    def _moved_off(self, k: int, before: BSplineSurface, after: BSplineSurface, grid: FaceGrid,
+                   allowance: Allowance) -> str:
+        """:meth:`moved_off` worked out."""
         was = self.distance(k, before, grid, keep_feet=True)
         allowed = allowance.allowed(was, self.tolerance)
         if self._bound(k, before, after, grid) <= allowed:
