@@ -507,6 +507,26 @@ def test_node_spacings_are_the_distances_to_the_nearest_other_foot_point():
         np.testing.assert_array_equal(cls.spacings, expected)
 
 
+def test_nodes_of_are_those_a_scan_finds():
+    """``Classification.nodes_of`` (a run of the nodes sorted by role and owner) equals a scan of every node, in
+    ascending order, for every role and owner, an owner beyond the largest and an ignored node's -1 included, and
+    a caller's change to the indices it got leaves the next answer alone."""
+    from hot2cold.core.model import Classification, Role
+
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        n = int(rng.integers(0, 300))
+        role = rng.choice(list(Role), n)
+        owner = np.where(role == Role.IGNORED, -1, rng.integers(0, 1 + trial, n))
+        cls = Classification(role, owner, np.zeros((n, 2)), np.zeros(n), np.zeros((n, 3)), np.zeros(n), 0.1, 0.01)
+        for r in Role:
+            for k in range(-2, trial + 3):
+                found = cls.nodes_of(r, k)
+                np.testing.assert_array_equal(found, np.flatnonzero((role == r) & (owner == k)))
+                found[:] = 0
+                np.testing.assert_array_equal(cls.nodes_of(r, k), np.flatnonzero((role == r) & (owner == k)))
+
+
 def _brute_closing(hot, cold, spacing):
     i, j = np.triu_indices(len(hot), 1)
     d_hot = np.linalg.norm(hot[i] - hot[j], axis=1)
