@@ -269,8 +269,9 @@ class Classification:
     @cached_property
     def _by_owner(self) -> tuple[np.ndarray, np.ndarray, int]:
         """The nodes ``(N,)`` sorted by role and owner (by index within each), their sorted keys ``(N,)``
-        ``role * span + owner + 1`` and ``span``, one more than the largest owner plus one: made when first
-        asked, once the classification's arrays are final (they are filled in place while it is made)."""
+        ``role * span + owner + 1`` and ``span``, the largest owner plus two (owners from -1 up, one key each):
+        made when first asked, once the classification's arrays are final (they are filled in place while it is
+        made)."""
         span = int(self.owner.max(initial=-1)) + 2
         keys = self.role.astype(np.int64) * span + (self.owner.astype(np.int64) + 1)
         order = np.argsort(keys, kind="stable")
