@@ -510,7 +510,7 @@ def test_node_spacings_are_the_distances_to_the_nearest_other_foot_point():
 def test_nodes_of_are_those_a_scan_finds():
     """``Classification.nodes_of`` (a run of the nodes sorted by role and owner) equals a scan of every node, in
     ascending order, for every role and owner, an owner beyond the largest and an ignored node's -1 included, and
-    a caller's change to the indices it got leaves the next answer alone."""
+    a caller's change to the indices it got leaves the next answer alone; ``groups`` from the same sort."""
     from hot2cold.core.model import Classification, Role
 
     rng = np.random.default_rng(7)
@@ -525,6 +525,14 @@ def test_nodes_of_are_those_a_scan_finds():
                 np.testing.assert_array_equal(found, np.flatnonzero((role == r) & (owner == k)))
                 found[:] = 0
                 np.testing.assert_array_equal(cls.nodes_of(r, k), np.flatnonzero((role == r) & (owner == k)))
+            groups = cls.groups(r)              # every owner of the role with its nodes, in owner order
+            expected = [(k, np.flatnonzero((role == r) & (owner == k))) for k in np.unique(owner[role == r])]
+            assert [k for k, _ in groups] == [int(k) for k, _ in expected]
+            for (_, nodes), (_, scan) in zip(groups, expected):
+                np.testing.assert_array_equal(nodes, scan)
+                nodes[:] = 0
+            for (_, nodes), (_, scan) in zip(cls.groups(r), expected):
+                np.testing.assert_array_equal(nodes, scan)
 
 
 def _brute_closing(hot, cold, spacing):

@@ -283,10 +283,11 @@ class Classification:
 
     def groups(self, role: Role) -> list[tuple[int, np.ndarray]]:
         """``(index, nodes)`` for every face, edge or vertex that owns nodes of ``role``, in index order
-        (one sort of all nodes instead of a scan per owner)."""
-        nodes = np.flatnonzero(self.role == role)
-        nodes = nodes[np.argsort(self.owner[nodes], kind="stable")]
-        return [(k, nodes[run]) for k, run in runs(self.owner[nodes])]
+        (the role's run of :attr:`_by_owner`, the one sort :meth:`nodes_of` reads)."""
+        order, keys, span = self._by_owner
+        first = int(role) * span
+        lo, hi = np.searchsorted(keys, first, side="left"), np.searchsorted(keys, first + span, side="left")
+        return [(owner - 1, order[lo:hi][run].copy()) for owner, run in runs(keys[lo:hi] - first)]
 
     @property
     def used(self) -> np.ndarray:
