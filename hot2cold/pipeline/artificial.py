@@ -48,6 +48,11 @@ _QUADRATIC_MIN = 10
 #: size from the affine span of the foot points (the directions in which they spread by more than the linear
 #: fit's cut-off, :data:`hot2cold.core.localfit.LINEAR_RCOND`).
 OFF_SPAN = 1e-9
+#: Points (or foot points) whose fits are made together.  A fit's arrays take a few kB a point (for ``k`` of
+#: 20: offsets, monomials and their products); a chunk of this size keeps them to a few MB, which a larger
+#: one exceeds, to be mapped afresh from the system at each chunk (page faults), and a smaller one pays the
+#: fixed cost of a chunk's calls more often (docs: the speed page's twenty-second round).
+FIT_CHUNK = 2048
 
 
 class FieldEstimator:
@@ -126,7 +131,7 @@ class FieldEstimator:
             valid[rows[owner[take]], place[take]] = True
         return idx, valid
 
-    def __call__(self, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    def __call__(self, x: np.ndarray, chunk: int = FIT_CHUNK) -> np.ndarray:
         """Estimated displacements ``(m, 3)`` at points ``x`` ``(m, 3)``, ``chunk`` points at a time: the linear
         fit plus the trusted share of the quadratic correction (both over the ``k`` nearest foot points, or
         over the wider balls of the module docstring)."""
@@ -185,7 +190,7 @@ class FieldEstimator:
                 self._memo[keys[i]] = estimate
         return np.array([self._memo[key] for key in keys]).reshape(x.shape)
 
-    def left_out(self, rows: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    def left_out(self, rows: np.ndarray, chunk: int = FIT_CHUNK) -> np.ndarray:
         """Estimates ``(m, 3)`` at the foot points ``rows (m,)`` (indices into ``points``) from the others,
         ``chunk`` rows at a time: the linear fit plus the trusted share of the quadratic correction over the
         ``k`` nearest foot points but the point itself (:meth:`__call__`'s fit, its wider neighbourhoods
@@ -202,7 +207,7 @@ class FieldEstimator:
             out[start:start + chunk] = self._left_out_fit(these, self._tree.query(self._points[these], k=k)[1])
         return out
 
-    def at_own(self, rows: np.ndarray, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    def at_own(self, rows: np.ndarray, chunk: int = FIT_CHUNK) -> tuple[np.ndarray, np.ndarray]:
         """At the foot points ``rows (m,)`` (indices into ``points``): the estimates ``(m, 3)`` that
         :meth:`__call__` gives there (the point among its ``k`` nearest) and those of :meth:`left_out` ``(m,
         3)``, the same numbers from one query of each point's ``k + 1`` nearest (the refinement asks both of
