@@ -49,9 +49,9 @@ _QUADRATIC_MIN = 10
 #: fit's cut-off, :data:`hot2cold.core.localfit.LINEAR_RCOND`).
 OFF_SPAN = 1e-9
 #: Points (or foot points) whose fits are made together.  A fit's arrays take a few kB a point (for ``k`` of
-#: 20: offsets, monomials and their products); a chunk of this size keeps them to a few MB, which a larger
-#: one exceeds, to be mapped afresh from the system at each chunk (page faults), and a smaller one pays the
-#: fixed cost of a chunk's calls more often (docs: the speed page's twenty-second round).
+#: 20: offsets, monomials and their products); a chunk of this size keeps them to a few MB.  Larger ones cost
+#: page faults where the allocator maps each afresh from the system, smaller ones pay the fixed cost of a
+#: chunk's calls more often (docs: the speed page's twenty-second round).
 FIT_CHUNK = 2048
 
 
