@@ -49,10 +49,9 @@ _QUADRATIC_MIN = 10
 #: fit's cut-off, :data:`hot2cold.core.localfit.LINEAR_RCOND`).
 OFF_SPAN = 1e-9
 #: Points (or foot points) whose fits are made together.  A fit's arrays take a few kB a point (for ``k`` of
-#: 20: offsets, monomials and their products); a chunk of this size keeps them to a few MB.  Larger ones cost
-#: page faults where the allocator maps each afresh from the system, smaller ones pay the fixed cost of a
-#: chunk's calls more often (docs: the speed page's twenty-second round).
-FIT_CHUNK = 2048
+#: 20: offsets, monomials and their products), so a chunk's arrays are a few MB each.  Smaller chunks cut the
+#: page faults of a short run and cost a long one time (docs: the speed page's twenty-second round).
+FIT_CHUNK = 4096
 
 
 class FieldEstimator:
