@@ -51,6 +51,56 @@ def test_curves_on_a_face_whose_parameters_slid_are_projected_again(tmp_path):
     np.testing.assert_allclose(back[0].volume, 1000.0, rtol=1e-9)
 
 
+def _edge_uses(shape):
+    """``(edge, face)`` of every non-degenerate edge use of ``shape``'s faces (a seam twice)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopoDS import TopoDS
+
+    from hot2cold.kernel.explore import edges_of, shape_map
+
+    return [(edge, TopoDS.Face_s(face)) for face in shape_map(shape, TopAbs_FACE) for edge in edges_of(face)
+            if not BRep_Tool.Degenerated_s(edge)]
+
+
+def test_the_kernels_gap_measure_is_the_point_by_point_one(monkeypatch):
+    """``_gap`` measures with ``BRepLib_ValidateEdge`` where an edge's curve and its curve on the face have one
+    rigid placement (the curves where they are defined), point by point elsewhere: the same largest distance
+    (the slid box's top edges 1.4 mm off their curves on the face, the others on them), the box moved too."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf, gp_Vec
+    from OCP.TopLoc import TopLoc_Location
+
+    import hot2cold.kernel.tolerances as tolerances
+
+    part, surfaces, _ = _slid_box()
+    stale = rebuild(part.kernel, surfaces, [e.curve for e in part.edges], part.vertices)
+    placement = gp_Trsf()
+    placement.SetRotation(gp_Ax1(gp_Pnt(1.0, 2.0, 3.0), gp_Dir(1.0, 1.0, 0.0)), 0.7)
+    placement.SetTranslationPart(gp_Vec(5.0, -3.0, 2.0))
+    moved = stale.shape.Moved(TopLoc_Location(placement))
+    for shape in (stale.shape, moved):
+        by_points = []
+        for edge, face in _edge_uses(shape):
+            c3d, on_face = BRepAdaptor_Curve(edge), BRepAdaptor_Curve(edge, face)
+            by_points.append(tolerances._sampled_gap(c3d, on_face, c3d.FirstParameter(), c3d.LastParameter(), 51))
+        by_points = np.array(by_points)
+        assert np.isclose(by_points.max(), np.sqrt(2.0), rtol=1e-9) and by_points.min() < 1e-12
+
+        point_by_point = []
+        monkeypatch.setattr(tolerances, "_sampled_gap", lambda *args: point_by_point.append(args) or np.inf)
+        gaps = np.array([tolerances._gap(edge, face, 51) for edge, face in _edge_uses(shape)])
+        monkeypatch.undo()
+        assert not point_by_point                             # the kernel's loop measured them all
+        np.testing.assert_allclose(gaps, by_points, rtol=0, atol=1e-12)
+
+    shifted, scaled = gp_Trsf(), gp_Trsf()
+    shifted.SetTranslation(gp_Vec(1.0, 0.0, 0.0))
+    scaled.SetScale(gp_Pnt(0.0, 0.0, 0.0), 2.0)
+    assert tolerances._same_rigid(gp_Trsf(), gp_Trsf()) and tolerances._same_rigid(placement, placement)
+    assert not tolerances._same_rigid(shifted, gp_Trsf()) and not tolerances._same_rigid(scaled, scaled)
+
+
 def _lofted_blade():
     """Three spline sections (12 points each, 80 mm apart, twisted by 50 degrees and tapered) lofted into a
     smooth blade, as a CAD system's loft gives it."""

@@ -25,12 +25,14 @@ import logging
 import numpy as np
 from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve
-from OCP.BRepLib import BRepLib
+from OCP.BRepLib import BRepLib, BRepLib_ValidateEdge
 from OCP.BRepTools import BRepTools
 from OCP.Geom2dAdaptor import Geom2dAdaptor_Curve
 from OCP.Geom2dInt import Geom2dInt_GInter
 from OCP.GeomAbs import GeomAbs_BSplineCurve
+from OCP.gp import gp_Identity
 from OCP.IntRes2d import IntRes2d_Domain
+from OCP.Precision import Precision
 from OCP.ShapeBuild import ShapeBuild_Edge
 from OCP.ShapeFix import ShapeFix_Edge
 from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
@@ -56,13 +58,45 @@ def _gap(edge, face, n: int) -> float:
     """Largest distance between the edge's 3D curve and its curve on ``face`` at ``n`` parameters, or at
     ``_PER_KNOT`` per knot of a B-spline curve where that is more: an edge refined to a tolerance has many
     spans, and a gap that rises and falls within a span slips between evenly spread samples, to be found by
-    BRepCheck later (InvalidCurveOnSurface, on arcs refined under a field with a kink)."""
+    BRepCheck later (InvalidCurveOnSurface, on arcs refined under a field with a kink).  The same parameter on
+    both curves, evenly spread over the edge's range, its ends included.
+
+    Measured by ``BRepLib_ValidateEdge`` (the kernel's loop, at those parameters) where the two curves have the
+    same range and the same rigid placement (measured where they are defined, the distances the same);
+    :func:`_sampled_gap` elsewhere, the same measure point by point."""
     c3d = BRepAdaptor_Curve(edge)
     on_face = BRepAdaptor_Curve(edge, face)
     if c3d.GetType() == GeomAbs_BSplineCurve:
         n = max(n, _PER_KNOT * c3d.NbKnots())
+    first, last = c3d.FirstParameter(), c3d.LastParameter()
+    if (n >= 2 and c3d.Is3DCurve() and _same_rigid(c3d.Trsf(), on_face.Trsf())
+            and abs(on_face.FirstParameter() - first) <= Precision.PConfusion_s()
+            and abs(on_face.LastParameter() - last) <= Precision.PConfusion_s()):
+        validate = BRepLib_ValidateEdge(c3d.Curve(), on_face.CurveOnSurface(), True)
+        validate.SetControlPointsNumber(n - 1)          # intervals: n parameters, the ends included
+        validate.Process()
+        if validate.IsDone():
+            return validate.GetMaxDistance() / _VALIDATE_MARGIN
+    return _sampled_gap(c3d, on_face, first, last, n)
+
+
+#: ``BRepLib_ValidateEdge.GetMaxDistance`` gives the largest distance it found times this (a margin of its own,
+#: for the tolerances it sets); :func:`_gap` takes it off, to state the distance itself.
+_VALIDATE_MARGIN = 1.00001
+
+
+def _same_rigid(a, b) -> bool:
+    """Whether the placements ``a`` and ``b`` (``gp_Trsf``) are one and the same rotation and translation."""
+    if a.Form() == gp_Identity and b.Form() == gp_Identity:
+        return True
+    return abs(a.ScaleFactor()) == 1.0 and all(a.Value(r, c) == b.Value(r, c) for r in (1, 2, 3) for c in (1, 2, 3, 4))
+
+
+def _sampled_gap(c3d, on_face, first: float, last: float, n: int) -> float:
+    """:func:`_gap` point by point: the largest distance between the curves ``c3d`` and ``on_face`` (adaptors of
+    the edge and of its curve on the face) at ``n`` parameters evenly spread over ``[first, last]``."""
     gap = 0.0
-    for t in np.linspace(c3d.FirstParameter(), c3d.LastParameter(), n):
+    for t in np.linspace(first, last, n):
         gap = max(gap, c3d.Value(t).Distance(on_face.Value(t)))
     return gap
 
