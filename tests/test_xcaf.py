@@ -290,3 +290,22 @@ def test_nested_assembly_with_a_part_placed_twice(tmp_path, capsys):
     for h, c in zip(hot_part.faces, back.faces):
         np.testing.assert_allclose(c.surface.poles.reshape(-1, 3), FIELD.exact_map(h.surface.poles.reshape(-1, 3)),
                                    atol=1e-7)
+
+
+@pytest.mark.quick
+def test_sub_shapes_are_found_by_their_paths_once_their_parents_children_are_listed():
+    """The sub-shapes of a located solid at the paths the hot document's sub-shapes are found by (its faces,
+    edges and vertices, the first path to a shared one): each the shape at that path, in place; a path
+    through a child that is not there is the kernel's error."""
+    from hot2cold.errors import KernelError
+    from hot2cold.kernel.xcaf import _Follower, _Paths
+
+    solid = cq.Workplane().box(10, 20, 30).val().moved(cq.Location((5, -3, 2), (1, 1, 0), 30)).wrapped
+    paths = _Paths(solid)
+    follow = _Follower(solid)
+    assert len(paths.paths) > 26                       # the solid, its shell, 6 faces, 12 edges, 8 vertices, wires
+    for path in paths.paths:
+        found = follow(path)
+        assert paths.path(found) == path and paths.map.FindKey(paths.map.FindIndex(found)).IsEqual(found)
+    with pytest.raises(KernelError, match="no child 6"):
+        follow((0, 6))

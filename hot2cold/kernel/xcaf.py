@@ -206,14 +206,25 @@ def _children(shape: TopoDS_Shape) -> list[TopoDS_Shape]:
     return out
 
 
-def follow(shape: TopoDS_Shape, path: tuple[int, ...]) -> TopoDS_Shape:
-    """The sub-shape of ``shape`` at ``path`` (child indices, located as ``TopoDS_Iterator`` places it)."""
-    for i in path:
-        children = _children(shape)
-        if not 0 <= i < len(children):
-            raise KernelError(f"the cold shape has no child {i} where the hot shape had one")
-        shape = children[i]
-    return shape
+class _Follower:
+    """The sub-shapes of one ``top`` shape at paths of child indices (called with a path), located as
+    ``TopoDS_Iterator`` places them; each shape's children are listed once: the named and coloured faces of a
+    part are children of one shell, and walking every path afresh would list all the shell's faces once a face."""
+
+    def __init__(self, top: TopoDS_Shape):
+        self._top = top
+        self._children: dict[tuple[int, ...], list[TopoDS_Shape]] = {}     # by the path to their parent
+
+    def __call__(self, path: tuple[int, ...]) -> TopoDS_Shape:
+        shape = self._top
+        for depth, i in enumerate(path):
+            children = self._children.get(path[:depth])
+            if children is None:
+                children = self._children[path[:depth]] = _children(shape)
+            if not 0 <= i < len(children):
+                raise KernelError(f"the cold shape has no child {i} where the hot shape had one")
+            shape = children[i]
+        return shape
 
 
 class _Paths:
@@ -267,6 +278,7 @@ class _Reader:
     def __init__(self, document: TDocStd_Document, shape: TopoDS_Shape):
         self.tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
         self.shape = shape
+        self.placed = _Follower(shape)
         self.solid_map = index_map(shape, TopAbs_SOLID)
         self.face_map = index_map(shape, TopAbs_FACE)
         self.solid_styles: list[tuple[list[Style], list[Style]]] = [([], [])] * self.solid_map.Size()
@@ -315,7 +327,7 @@ class _Reader:
                         "written without names and colours", style.name or "no name")
             self.lost += 1
             return Node(style, path=None, location=prototype.Location())
-        instance = follow(self.shape, path)
+        instance = self.placed(path)
         for face in _sub_shapes(instance, TopAbs_FACE):
             self.covered.add(self.face_map.FindIndex(face) - 1)
         # names: the instance's, else the part's; colours: also from the assemblies around it
@@ -330,6 +342,7 @@ class _Reader:
         labels = TDF_LabelSequence()
         XCAFDoc_ShapeTool.GetSubShapes_s(label, labels)
         paths = _Paths(prototype) if labels.Length() else None
+        below = _Follower(instance)
         for sub_label in _labels(labels):
             sub_style = _style(sub_label)
             if not sub_style:
@@ -338,7 +351,7 @@ class _Reader:
             if sub_path is None:
                 self.lost += 1
                 continue
-            sub = follow(instance, sub_path)
+            sub = below(sub_path)
             kind = sub.ShapeType().name.removeprefix("TopAbs_").lower()
             index = -1
             if kind == "face":
@@ -428,7 +441,8 @@ def read_step_styles(path: str | os.PathLike) -> tuple[TopoDS_Shape, Styles]:
 # ----------------------------------------------------------------------------------------------------------
 # Writing
 # ----------------------------------------------------------------------------------------------------------
-def _build(node: Node, cold: TopoDS_Shape, tool, colours) -> TDF_Label:
+def _build(node: Node, cold: _Follower, tool, colours) -> TDF_Label:
+    """``node``'s label in the cold document, its parts found in the cold shape by their paths (``cold``)."""
     if node.assembly:
         label = tool.NewShape()
         for instance in node.children:
@@ -438,11 +452,12 @@ def _build(node: Node, cold: TopoDS_Shape, tool, colours) -> TDF_Label:
                 raise KernelError("the kernel could not add an assembly component to the cold document")
             _set_style(component, instance.style, colours)
     else:
-        prototype = follow(cold, node.path).Located(node.location)
+        prototype = cold(node.path).Located(node.location)
         label = tool.NewShape()
         tool.SetShape(label, prototype)
+        below = _Follower(prototype)
         for sub in node.subshapes:
-            sub_label = tool.AddSubShape(label, follow(prototype, sub.path))
+            sub_label = tool.AddSubShape(label, below(sub.path))
             if sub_label.IsNull():
                 log.warning("a %s of the cold part could not be labelled; its name and colour are not written",
                             sub.kind)
@@ -458,8 +473,9 @@ def cold_document(cold: TopoDS_Shape, styles: Styles) -> TDocStd_Document:
     document = _new_document()
     tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
     colours = XCAFDoc_DocumentTool.ColorTool_s(document.Main())
+    placed = _Follower(cold)
     for root in styles.roots:
-        label = _build(root.node, cold, tool, colours)
+        label = _build(root.node, placed, tool, colours)
         if root.reference:
             placed = TDF_Label()
             tool.SetLocation(label, root.location, placed)
