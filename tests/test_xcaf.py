@@ -309,3 +309,36 @@ def test_sub_shapes_are_found_by_their_paths_once_their_parents_children_are_lis
         assert paths.path(found) == path and paths.map.FindKey(paths.map.FindIndex(found)).IsEqual(found)
     with pytest.raises(KernelError, match="no child 6"):
         follow((0, 6))
+
+
+@pytest.mark.quick
+def test_a_cold_document_of_two_placed_free_shapes_holds_both():
+    """Two free shapes of the document, each placed (a reference label): the cold document holds both, with their
+    names, each where the shape has it."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TDF import TDF_LabelSequence
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.XCAFDoc import XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
+
+    from hot2cold.kernel.xcaf import Instance, Node, Style, Styles, _style, cold_document
+
+    boxes = [cq.Workplane().box(10, 10, 10).val().moved(cq.Location((20 * k, 0, 0))).wrapped for k in range(2)]
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    for box in boxes:
+        builder.Add(compound, box)
+    names = ("left", "right")
+    roots = tuple(Instance(Style(name), TopLoc_Location(), Node(Style(name), path=(k,), location=TopLoc_Location(),
+                                                                solids=(k,)))
+                  for k, name in enumerate(names))
+    styles = Styles(roots, tuple(Style(name) for name in names), (Style(),) * 12, True)
+
+    document = cold_document(compound, styles)
+    free = TDF_LabelSequence()
+    XCAFDoc_DocumentTool.ShapeTool_s(document.Main()).GetFreeShapes(free)
+    labels = [free.Value(i) for i in range(1, free.Length() + 1)]
+    assert len(labels) == 2
+    for label, box, name in zip(labels, boxes, names):
+        assert XCAFDoc_ShapeTool.GetShape_s(label).IsPartner(box) and _style(label).name == name

@@ -473,9 +473,9 @@ def cold_document(cold: TopoDS_Shape, styles: Styles) -> TDocStd_Document:
     document = _new_document()
     tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
     colours = XCAFDoc_DocumentTool.ColorTool_s(document.Main())
-    placed = _Follower(cold)
+    in_cold = _Follower(cold)
     for root in styles.roots:
-        label = _build(root.node, placed, tool, colours)
+        label = _build(root.node, in_cold, tool, colours)
         if root.reference:
             placed = TDF_Label()
             tool.SetLocation(label, root.location, placed)
