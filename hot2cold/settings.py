@@ -103,6 +103,15 @@ class Settings:
         mostly Python's own, which runs one thread at a time): the results are the same for any count.  The
         ``hot2cold morph`` command takes the process's cores; a batch runs one job per core, each in one
         thread; 1 (the default) for a morph called from Python, which may have other work for the cores.
+    kernel_process : bool
+        Integrate the volumes of the hot and the cold solids (the volume checks of the cold part) in a second
+        Python process while the morph goes on (:mod:`hot2cold.kernel.side`): the kernel holds Python's lock
+        through its calls, so a thread cannot run them beside the morph's own work, and on a part of hundreds
+        of faces they are its slowest kernel calls.  The volumes are the same to the bit either way; a second
+        process that cannot start or fails leaves them to this one.  The ``hot2cold morph`` command runs one
+        when it has a second core; False (the default) for a morph called from Python, which may run where
+        starting another interpreter (``sys.executable``) is unwelcome, and for a batch job, whose cores run
+        other jobs.
     extrapolate : bool
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
@@ -142,6 +151,7 @@ class Settings:
     g2_tolerance: float = 0.01
     blas_threads: int | None = None
     threads: int = 1
+    kernel_process: bool = False
     extrapolate: bool = False
     element_points: bool = True
     max_displacement_rel: float = 0.1

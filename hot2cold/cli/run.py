@@ -19,11 +19,12 @@ from .options import MorphOptions
 def run_morph(hot, field, options: MorphOptions, progress=None, threads: int = 1):
     """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path) with ``field`` (field file path) under
     ``options``, in up to ``threads`` threads (``Settings.threads``: ``hot2cold morph`` gives its cores, a
-    batch job one); returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked: :func:`write_cold`
-    writes the report first and then refuses an invalid part."""
+    batch job one), with the volumes in a second process where it has more than one
+    (``Settings.kernel_process``); returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked:
+    :func:`write_cold` writes the report first and then refuses an invalid part."""
     from ..pipeline.morph import morph
 
-    settings = replace(options.to_settings(), threads=threads)
+    settings = replace(options.to_settings(), threads=threads, kernel_process=threads > 1)
     return morph(hot, field, settings, **options.morph_arguments(), progress=progress, check=False)
 
 

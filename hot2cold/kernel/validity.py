@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -73,6 +73,19 @@ def volume(shape) -> float:
     props = GProp_GProps()
     BRepGProp.VolumeProperties_s(shape, props, GPROP_EPS)
     return float(props.Mass())
+
+
+def solid_volumes(shape) -> list[float]:
+    """The volume (mm^3) of each solid of ``shape``, in :func:`~hot2cold.kernel.explore.shape_map`'s order
+    (:func:`volume`)."""
+    return [volume(solid) for solid in shape_map(shape, TopAbs_SOLID)]
+
+
+def with_volumes(checks: list[SolidCheck], volumes: list[float]) -> list[SolidCheck]:
+    """``checks`` (one per solid) with their ``volumes`` (mm^3, one per solid) filled in."""
+    if len(volumes) != len(checks):
+        raise KernelError(f"{len(volumes)} volumes for {len(checks)} solids")
+    return [replace(c, volume=v) for c, v in zip(checks, volumes)]
 
 
 def face_areas(faces) -> np.ndarray:

@@ -35,7 +35,7 @@ from .classify import Starts, curve_length, part_distances
 from .face_fit import FaceMorph
 from .grids import CHECK_SPACING, FaceGrid
 from ..io.field import DisplacementField
-from ..kernel.validity import SolidCheck, face_areas, self_intersections
+from ..kernel.validity import SolidCheck, face_areas, self_intersections, with_volumes
 from ..core.model import Classification, Part, Role
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel
@@ -629,13 +629,24 @@ class Rebuilt:
     ----------
     kernel : ColdKernel, the cold geometry in a copy of the hot part's kernel shape.
     faces : list of FaceMorph, one per face of the hot part, the cold surfaces.
-    hot_checks, cold_checks : one :class:`SolidCheck` per hot and per cold solid.
+    hot_checks, cold_checks : one :class:`SolidCheck` per hot and per cold solid (their volumes None where
+        ``volumes`` brings them).
+    volumes : the hot and the cold solids' volumes still being integrated (two
+        :class:`~hot2cold.kernel.side.Volumes`), or None: the checks hold them.
     """
 
     kernel: ColdKernel
     faces: list[FaceMorph]
     hot_checks: list[SolidCheck]
     cold_checks: list[SolidCheck]
+    volumes: tuple | None = None
+
+    def solid_checks(self) -> tuple[list[SolidCheck], list[SolidCheck]]:
+        """The hot and the cold checks with their volumes, waited for where :attr:`volumes` brings them."""
+        if self.volumes is None:
+            return self.hot_checks, self.cold_checks
+        hot, cold = self.volumes
+        return with_volumes(self.hot_checks, hot.result()), with_volumes(self.cold_checks, cold.result())
 
 
 def check_cold(part: Part, rebuilt: Rebuilt, projector: Projector, scale: FieldScale, grids: list[FaceGrid],
@@ -657,8 +668,11 @@ def check_cold(part: Part, rebuilt: Rebuilt, projector: Projector, scale: FieldS
     closer than two sample spacings in the cold part that were more than twice as far apart, and a sample
     spacing farther, in the hot one.  A field moves a part as the FE solution says, and nearby points of a part
     stay about as far apart as they were; where two sides of a gap come together, their points do not.
+
+    The volumes are asked for last (:meth:`Rebuilt.solid_checks`): a second process may integrate them while
+    the grids are checked here (``Settings.kernel_process``).
     """
-    problems = _volume_problems(rebuilt.hot_checks, rebuilt.cold_checks, scale)
+    found: dict[int, list[str]] = {}         # what the grids find, after what the volumes say
     spacing = CHECK_SPACING * part.diagonal
     hot_points, cold_points = [], []
     farthest = (0.0, -1)
@@ -677,14 +691,17 @@ def check_cold(part: Part, rebuilt: Rebuilt, projector: Projector, scale: FieldS
             unmeasured[face.index] = float(np.mean(left))
             uncertain[face.index] = float(np.mean(left & grid.near))
             if off[k] > scale.between_bound:
-                problems.setdefault(face.solid, []).append(
+                found.setdefault(face.solid, []).append(
                     f"leaves the field between the nodes: face {face.index} is {off[k]:.4g} mm from where the "
                     f"field's local estimate puts it near ({', '.join(f'{x:.4g}' for x in hot[k])}) mm, more "
                     f"than {_BETWEEN_MARGIN:g} x the field's largest displacement ({scale.largest:.4g} mm)")
         moves = np.linalg.norm(cold - hot, axis=1)
         farthest = max(farthest, (float(moves.max()) if len(moves) else 0.0, face.index))
         for text in _grid_problems(face, (hot, hot_n), (cold, cold_n), scale, part.diagonal):
-            problems.setdefault(face.solid, []).append(text)
+            found.setdefault(face.solid, []).append(text)
+    problems = _volume_problems(*rebuilt.solid_checks(), scale)
+    for solid, texts in found.items():
+        problems.setdefault(solid, []).extend(texts)
     log.info("the cold part moves face %d farthest, by %.4g mm (%.4g mm accepted: the field's largest "
              "displacement %.4g mm)", farthest[1], farthest[0], scale.move_bound, scale.largest)
     closing = closing_pairs(np.concatenate(hot_points), np.concatenate(cold_points), spacing)

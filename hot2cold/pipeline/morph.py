@@ -32,6 +32,7 @@ from ..io.field import DisplacementField, as_field
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel, rebuild
 from ..kernel.shapes import shape_type
+from ..kernel.side import KernelSide, Volumes
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.validity import check_solids
 from ..settings import Settings
@@ -137,9 +138,10 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
     """
     settings = settings or Settings()
     limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
-    with limit:
+    with limit, KernelSide(settings.kernel_process) as side:
         result = _morph(hot, field, settings, dict(units=units, field_name=field_name, step=field_step,
-                                                   columns=columns, points_from=field_points), invert, progress)
+                                                   columns=columns, points_from=field_points), invert, progress,
+                        side)
     if check:
         check_result(result)
     return result
@@ -339,10 +341,12 @@ class _Cold:
                       self.farthest_node)
 
 
-def _rebuild_and_check(context: MorphContext, fits: Fits, classified: _Classified, hot_checks: list,
-                       grids: list[FaceGrid], stages: _Stages) -> _Cold:
+def _rebuild_and_check(context: MorphContext, fits: Fits, classified: _Classified,  # noqa: PLR0913
+                       hot: tuple[list, Volumes], grids: list[FaceGrid], stages: _Stages, side: KernelSide) -> _Cold:
     """Rebuild the cold part (the cold geometry in a copy of the kernel shape), sew it (tolerances fitted to its
-    gaps) and check it (:func:`~hot2cold.pipeline.checks.check_cold`)."""
+    gaps) and check it (:func:`~hot2cold.pipeline.checks.check_cold`); ``hot``, the hot solids' checks without
+    their volumes and the volumes as asked for, and the cold solids' volumes asked of ``side``, are waited for
+    once the cold part's grids are checked."""
     part, settings = context.part, context.settings
     vertices = part.vertices + context.vertex_displacements
     stages.begin("rebuild")
@@ -351,12 +355,13 @@ def _rebuild_and_check(context: MorphContext, fits: Fits, classified: _Classifie
     stages.begin("sew")
     gaps = fit_tolerances(cold, reproject_above=_REPROJECT_SHARE * part.diagonal,
                           touch_bound=_TOUCH_SHARE * part.diagonal)
-    cold_checks = check_solids(cold.shape)
+    cold_checks = check_solids(cold.shape, volumes=False)
+    rebuilt = Rebuilt(cold, fits.faces, hot[0], cold_checks, (hot[1], side.volumes(cold.shape)))
     stages.lap("sew")
     stages.begin("check")
     tolerance = (settings.tolerance if settings.tolerance is not None else np.inf) + classified.allowance
-    check = check_cold(part, Rebuilt(cold, fits.faces, hot_checks, cold_checks), classified.projector,
-                       classified.scale, grids, tolerance)
+    check = check_cold(part, rebuilt, classified.projector, classified.scale, grids, tolerance)
+    hot_checks, cold_checks = rebuilt.solid_checks()
     cold_checks = [replace(c, valid=False) if s in check.problems else c for s, c in enumerate(cold_checks)]
     stages.lap("check")
     return _Cold(cold, vertices, gaps, hot_checks, cold_checks, check, np.array([g.farthest_node for g in grids]))
@@ -407,9 +412,11 @@ def _result(context: MorphContext, classified: _Classified, fits: Fits, cold: _C
                        problems=tuple(f"cold solid {s} {text}" for s in sorted(problems) for text in problems[s]))
 
 
-def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress: Progress | None) -> MorphResult:
-    """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords.
-    The steps of METHOD in order, each a function of its own; the stages timed and told to ``progress``."""
+def _morph(hot, field, settings: Settings, reading: dict, invert: bool,  # noqa: PLR0913
+           progress: Progress | None, side: KernelSide) -> MorphResult:
+    """:func:`morph` within its BLAS thread limit, unchecked; ``reading`` holds :func:`as_field`'s keywords,
+    ``side`` integrates the volumes (:class:`~hot2cold.kernel.side.KernelSide`).  The steps of METHOD in order,
+    each a function of its own; the stages timed and told to ``progress``."""
     stages = _Stages(progress)
     field = as_field(field, **reading)     # no start marker: a field refused says so alone
     stages.lap("read")
@@ -422,8 +429,9 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
     # load (METHOD step 1): the hot part in B-spline form, a closed solid
     stages.begin("load")
     part = load_part(hot, settings)
-    hot_checks = check_solids(part.kernel.hot)
+    hot_checks = check_solids(part.kernel.hot, volumes=False)
     check_hot(part, hot_checks)
+    hot_volumes = side.volumes(part.kernel.hot)      # needed when the cold part is checked
     stages.lap("load")
     memo = BasisMemo()         # the basis rows asked of the faces, for when they are asked again (bounded)
     for face in part.faces:
@@ -454,7 +462,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool, progress
 
     # G1 and G2 along the tangent edges, then rebuild, sew and check, then the report
     context, grids, fits = _smooth_edges(context, refined, corners, regrid, stages)
-    cold = _rebuild_and_check(context, fits, classified, hot_checks, grids, stages)
+    cold = _rebuild_and_check(context, fits, classified, (hot_checks, hot_volumes), grids, stages, side)
     about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
              "inversion": None if inversion is None else asdict(inversion)}
     result = replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))
