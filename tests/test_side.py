@@ -58,17 +58,18 @@ def test_asked_before_the_second_process_is_ready_the_volumes_are_integrated_her
         assert side.running                                             # not waited for
 
 
-def test_the_second_process_answers_ready_then_one_line_per_request(two_boxes, tmp_path):
+def test_the_second_process_answers_ready_then_one_named_line_per_request(two_boxes, tmp_path):
     from OCP.BinTools import BinTools
 
-    path = tmp_path / "shape.bin"
+    path = tmp_path / "0.bin"
     assert BinTools.Write_s(two_boxes, str(path))
     answers = io.StringIO()
-    serve(io.StringIO(f"{path}\n{tmp_path / 'missing.bin'}\n"), answers)
+    serve(io.StringIO(f"{path}\n{tmp_path / '1.bin'}\n"), answers)     # the second file is not there
     ready, good, bad = answers.getvalue().splitlines()
     assert ready == "ready"
-    assert [float(v) for v in good.split()[1:]] == solid_volumes(two_boxes) and good.startswith("ok ")
-    assert bad.startswith("error ") and side_module._volumes(bad) is None
+    assert side_module._answer(good) == (0, solid_volumes(two_boxes)) and good.startswith("ok 0 ")
+    assert bad.startswith("error 1 ") and side_module._answer(bad) == (1, None)
+    assert side_module._answer("*** a line the kernel printed") is None
     assert not path.exists()                                            # read, then removed
 
 

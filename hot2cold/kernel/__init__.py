@@ -7,6 +7,7 @@ here.  Modules: :mod:`.explore` (shape maps, size, B-spline geometry: the base t
 records), :mod:`.convert` (records <-> ``Geom_BSpline*``), :mod:`.project`
 (the kernel's foot points and trimmed-domain classification), :mod:`.rebuild` (cold poles into a
 copy of the hot part's kernel shape), :mod:`.tolerances` (edge and vertex tolerances fitted to the
-gaps), :mod:`.validity` (BRepCheck, volumes, self-intersection), :mod:`.tessellate`, :mod:`.shapes`
+gaps), :mod:`.validity` (BRepCheck, volumes, self-intersection) with :mod:`.side` (the volumes in a second process
+beside the morph), :mod:`.tessellate`, :mod:`.shapes`
 (CadQuery <-> TopoDS) and :mod:`.sampling` (points on and in a solid, for tests and benchmarks).
 """

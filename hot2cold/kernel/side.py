@@ -32,6 +32,7 @@ from .validity import solid_volumes
 
 log = logging.getLogger(__name__)
 
+
 class Volumes:
     """The volumes of a shape's solids, asked for (:meth:`KernelSide.volumes`); :meth:`result` waits for them."""
 
@@ -65,7 +66,7 @@ class KernelSide:
     def __init__(self, start: bool = True):
         self._process: subprocess.Popen | None = None
         self._folder: str | None = None
-        self._asked = self._answered = 0
+        self._asked = 0
         self._answers: dict[int, list[float] | None] = {}
         self._lines: queue.Queue[str | None] = queue.Queue()
         self._ready = False
@@ -118,7 +119,7 @@ class KernelSide:
         self._take(block=False)
         if not self._ready and self._process is not None:
             log.debug("volumes %d integrated in this process: the second process is not ready yet", request)
-        while request >= self._answered and self._process is not None and self._ready:
+        while request not in self._answers and self._process is not None and self._ready:
             self._take(block=True)
         return self._answers.pop(request, None)
 
@@ -135,13 +136,13 @@ class KernelSide:
             if line is None:
                 self._stop("ended")
                 return
-            if not self._ready:
-                self._ready = line.strip() == _READY
-                if not self._ready:
-                    self._stop(f"said {line.strip()[:80]!r} on starting")
+            found = _answer(line)
+            if not self._ready and line.strip() == _READY:
+                self._ready = True
+            elif self._ready and found is not None:
+                self._answers[found[0]] = found[1]
             else:
-                self._answers[self._answered] = _volumes(line)
-                self._answered += 1
+                continue                         # no answer (a line the kernel printed, say): read on
             block = False
 
     def close(self) -> None:
@@ -182,32 +183,37 @@ def _read_lines(stream, lines: queue.Queue) -> None:
     lines.put(None)
 
 
-def _volumes(line: str) -> list[float] | None:
-    """The volumes of an answer line (``ok v0 v1 ...``), None for any other line (``error ...``)."""
+def _answer(line: str) -> tuple[int, list[float] | None] | None:
+    """The request and its volumes of an answer line (``ok <request> v0 v1 ...``; None for the volumes of
+    ``error <request> ...``); None for any other line."""
     words = line.split()
-    if not words or words[0] != "ok":
+    if len(words) < 2 or words[0] not in ("ok", "error") or not words[1].isdigit():
         return None
+    if words[0] == "error":
+        return int(words[1]), None
     try:
-        return [float(w) for w in words[1:]]
+        return int(words[1]), [float(w) for w in words[2:]]
     except ValueError:
-        return None
+        return int(words[1]), None
 
 
 def serve(requests, answers) -> None:
-    """The second process: :data:`_READY` on ``answers``, then for each line of ``requests`` (a binary BRep
-    file's path) the volumes of the shape's solids as ``ok v0 v1 ...`` (``repr``: read back to the bit) or
-    ``error <why>``, one line each; the file is removed once read."""
+    """The second process: :data:`_READY` on ``answers``, then for each line of ``requests`` (the path of a
+    binary BRep file named ``<request>.bin``) the volumes of the shape's solids as ``ok <request> v0 v1 ...``
+    (``repr``: read back to the bit) or ``error <request> <why>``, one line each (the request named, so that
+    a line the kernel prints among them is no answer); the file is removed once read."""
     answers.write(_READY + "\n")
     answers.flush()
     for line in iter(requests.readline, ""):
         path = line.strip()
+        request = os.path.splitext(os.path.basename(path))[0]
         try:
             shape = TopoDS_Shape()
             if not BinTools.Read_s(shape, path):
                 raise ValueError(f"{path} could not be read")
-            answer = "ok " + " ".join(repr(v) for v in solid_volumes(shape))
+            answer = f"ok {request} " + " ".join(repr(v) for v in solid_volumes(shape))
         except Exception as exc:          # noqa: BLE001 - the other process integrates it itself
-            answer = "error " + " ".join(str(exc).split())
+            answer = f"error {request} " + " ".join(str(exc).split())
         finally:
             try:
                 os.remove(path)
