@@ -203,7 +203,8 @@ def one(n: int, field: Path, with_direct: bool, blade: str = "rotor37", threads:
     from hot2cold.settings import Settings
     imports = time.perf_counter() - clock
 
-    settings = Settings(blas_threads=1, threads=threads)     # as the command line runs it, with its cores
+    # as the command line runs it, with its cores (and its second process for the volumes where it has two)
+    settings = Settings(blas_threads=1, threads=threads, kernel_process=threads > 1)
     start = time.perf_counter()
     result = morph(STEPS[blade], field, settings)
     total = time.perf_counter() - start
