@@ -108,8 +108,10 @@ class Settings:
         Python process while the morph goes on (:mod:`hot2cold.kernel.side`): the kernel holds Python's lock
         through its calls, so a thread cannot run them beside the morph's own work, and on a part of hundreds
         of faces they are its slowest kernel calls.  The volumes are the same to the bit either way; a second
-        process that cannot start or fails leaves them to this one.  The ``hot2cold morph`` command runs one
-        when it has a second core; False (the default) for a morph called from Python, which may run where
+        process that cannot start or fails leaves them to this one.  Only for a part of
+        ``hot2cold.pipeline.morph.KERNEL_PROCESS_FACES`` faces or more (a smaller part's volumes take less than
+        the process takes to start).  The ``hot2cold morph`` command runs one when it has a second core; False
+        (the default) for a morph called from Python, which may run where
         starting another interpreter (``sys.executable``) is unwelcome, and for a batch job, whose cores run
         other jobs.
     extrapolate : bool

@@ -73,11 +73,16 @@ def test_the_second_process_answers_ready_then_one_named_line_per_request(two_bo
     assert not path.exists()                                            # read, then removed
 
 
-def test_a_morph_with_a_second_process_reports_the_same_volumes(block_shape, block_nodes):
+def test_a_morph_with_a_second_process_reports_the_same_volumes(block_shape, block_nodes, monkeypatch):
     """The hot and cold volumes of a morph whose second process integrates them (its answers read while the
     cold part's grids are checked) are this process's, and so is the rest of the report."""
+    from hot2cold.pipeline import morph as morph_module
     from hot2cold.pipeline.morph import morph
     from hot2cold.settings import Settings
+
+    monkeypatch.setattr(morph_module, "KERNEL_PROCESS_FACES", 1)      # the block's 18 faces get the process
+    started = []
+    monkeypatch.setattr(KernelSide, "start", lambda self, start=KernelSide.start: (started.append(1), start(self)))
     from hot2cold.testing.synthetic import AffineField
 
     thermal = AffineField.thermal(contraction=-0.004, rotation_deg=0.3, axis=(0.2, 0.3, 1.0),
@@ -88,3 +93,4 @@ def test_a_morph_with_a_second_process_reports_the_same_volumes(block_shape, blo
         [(s.volume_hot, s.volume_cold) for s in here.report.solids]
     assert beside.report.solids[0].volume_cold != beside.report.solids[0].volume_hot     # the field moved it
     assert beside.report.delta_max == here.report.delta_max
+    assert started == [1]                                               # the second morph's process only

@@ -56,8 +56,8 @@ _READY = "ready"
 
 class KernelSide:
     """A second process that integrates solids' volumes while this one goes on (see the module docstring);
-    ``start=False``: none, every volume integrated here when asked for.  A context manager: leaving it ends
-    the process and removes its files.
+    ``start=False``: none until :meth:`start`, every volume integrated here when asked for until then.  A
+    context manager: leaving it ends the process and removes its files.
 
     A thread reads the process's answers as they come.  A volume asked for before the process is ready (it
     takes about as long to import the kernel as this one did: a small part's morph may be done by then) is
@@ -71,15 +71,21 @@ class KernelSide:
         self._lines: queue.Queue[str | None] = queue.Queue()
         self._ready = False
         if start:
-            try:
-                self._folder = tempfile.mkdtemp(prefix="hot2cold-side-")
-                self._process = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
-                                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-            except OSError as exc:
-                self._stop(f"it could not start ({exc})")
-            else:
-                threading.Thread(target=_read_lines, args=(self._process.stdout, self._lines), daemon=True,
-                                 name="hot2cold-side").start()
+            self.start()
+
+    def start(self) -> None:
+        """Start the second process (if it is not there yet)."""
+        if self._process is not None:
+            return
+        try:
+            self._folder = tempfile.mkdtemp(prefix="hot2cold-side-")
+            self._process = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
+                                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        except OSError as exc:
+            self._stop(f"it could not start ({exc})")
+        else:
+            threading.Thread(target=_read_lines, args=(self._process.stdout, self._lines), daemon=True,
+                             name="hot2cold-side").start()
 
     @property
     def running(self) -> bool:

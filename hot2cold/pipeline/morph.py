@@ -138,7 +138,7 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
     """
     settings = settings or Settings()
     limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
-    with limit, KernelSide(settings.kernel_process) as side:
+    with limit, KernelSide(start=False) as side:       # started once the part is loaded, if it is worth it
         result = _morph(hot, field, settings, dict(units=units, field_name=field_name, step=field_step,
                                                    columns=columns, points_from=field_points), invert, progress,
                         side)
@@ -146,6 +146,11 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
         check_result(result)
     return result
 
+
+#: A part of fewer faces integrates its volumes in the morph's own process (``Settings.kernel_process``): there
+#: they take far less than the second process takes to start, and its import would take a core from a morph of
+#: many nodes (measured: the speed page's twenty-fourth round).
+KERNEL_PROCESS_FACES = 100
 
 #: Scatter below this share of the tolerance is not smoothed: it cannot carry a fit out of the tolerance, and
 #: smoothing towards the field's estimate is not free (a second fit per face).
@@ -431,6 +436,8 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool,  # noqa:
     part = load_part(hot, settings)
     hot_checks = check_solids(part.kernel.hot, volumes=False)
     check_hot(part, hot_checks)
+    if settings.kernel_process and len(part.faces) >= KERNEL_PROCESS_FACES:
+        side.start()
     hot_volumes = side.volumes(part.kernel.hot)      # needed when the cold part is checked
     stages.lap("load")
     memo = BasisMemo()         # the basis rows asked of the faces, for when they are asked again (bounded)
