@@ -111,9 +111,8 @@ class Settings:
         process that cannot start or fails leaves them to this one.  Only for a part of
         ``hot2cold.pipeline.morph.KERNEL_PROCESS_FACES`` faces or more (a smaller part's volumes take less than
         the process takes to start).  The ``hot2cold morph`` command runs one when it has a second core; False
-        (the default) for a morph called from Python, which may run where
-        starting another interpreter (``sys.executable``) is unwelcome, and for a batch job, whose cores run
-        other jobs.
+        (the default) for a morph called from Python, which may run where starting another interpreter
+        (``sys.executable``) is unwelcome, and for a batch job, whose cores run other jobs.
     extrapolate : bool
         A face that gets no FE node (a field that covers only part of the solid) is an error (FieldError)
         unless this is True: then such faces are morphed from artificial nodes alone, extrapolated from the
