@@ -8,11 +8,11 @@ second core idle, and the volumes of the hot and the cold solids (``BRepGProp`` 
 when the cold part is checked: the hot one's is integrated while the field is classified and fitted, the cold
 one's while the cold part's grids are checked.
 
-The second process is ``python -m hot2cold.kernel.side``, started once per morph (:class:`KernelSide`); it
-reads a binary BRep file per request (``BinTools``: the doubles as they are, so a volume is the one this
-process would integrate, to the bit) and answers with a line of text, in the order asked.  Whatever goes wrong
-with it (it cannot start, it dies, it answers what is no volume), the volumes are integrated in this process
-instead, as without it, and the morph goes on.
+The second process is ``python -m hot2cold.kernel.side``, started at most once per morph (:class:`KernelSide`);
+it reads a binary BRep file per request (``BinTools``: the doubles as they are, so a volume is the one this
+process would integrate, to the bit) and answers with a line of text that names the request (:func:`serve`).
+Whatever goes wrong with it (it cannot start, it dies, it answers what is no volume), the volumes are integrated
+in this process instead, as without it, and the morph goes on.
 """
 from __future__ import annotations
 
