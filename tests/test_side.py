@@ -94,3 +94,20 @@ def test_a_morph_with_a_second_process_reports_the_same_volumes(block_shape, blo
     assert beside.report.solids[0].volume_cold != beside.report.solids[0].volume_hot     # the field moved it
     assert beside.report.delta_max == here.report.delta_max
     assert started == [1]                                               # the second morph's process only
+
+
+def test_the_second_process_runs_this_package_not_one_in_the_working_directory(two_boxes, tmp_path, monkeypatch):
+    """A checkout of another version in the working directory (where ``python -m`` would look first) is not
+    the one that answers: this one, which integrates the true volumes, does."""
+    fake = tmp_path / "hot2cold" / "kernel"
+    fake.mkdir(parents=True)
+    for folder in (fake.parent, fake):
+        (folder / "__init__.py").write_text("")
+    (fake / "side.py").write_text("def serve(requests, answers):\n"
+                                  "    answers.write('ready\\n'); answers.flush()\n"
+                                  "    for line in iter(requests.readline, ''):\n"
+                                  "        answers.write('ok 0 1.0 2.0\\n'); answers.flush()\n")
+    monkeypatch.chdir(tmp_path)
+    with KernelSide() as side:
+        assert side.ready(wait=60.0)
+        assert side.volumes(two_boxes).result() == solid_volumes(two_boxes)

@@ -8,7 +8,7 @@ second core idle, and the volumes of the hot and the cold solids (``BRepGProp`` 
 when the cold part is checked: the hot one's is integrated while the field is classified and fitted, the cold
 one's while the cold part's grids are checked.
 
-The second process is ``python -m hot2cold.kernel.side``, started at most once per morph (:class:`KernelSide`);
+The second process is this module's :func:`serve`, started at most once per morph (:class:`KernelSide`);
 it reads a binary BRep file per request (``BinTools``: the doubles as they are, so a volume is the one this
 process would integrate, to the bit) and answers with a line of text that names the request (:func:`serve`).
 Whatever goes wrong with it (it cannot start, it dies, it answers what is no volume), the volumes are integrated
@@ -52,6 +52,12 @@ class Volumes:
 
 #: The second process's first line, once it has imported the kernel and takes requests.
 _READY = "ready"
+#: The folder that holds this ``hot2cold`` package, and the second process's program: it imports the package
+#: from there, the one this process runs (``python -m`` would put the working directory first, and a checkout of
+#: another version there would answer instead).
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_CHILD = ("import sys; sys.path.insert(0, {root!r}); from hot2cold.kernel.side import serve; "
+          "serve(sys.stdin, sys.stdout)")
 
 
 class KernelSide:
@@ -79,7 +85,7 @@ class KernelSide:
             return
         try:
             self._folder = tempfile.mkdtemp(prefix="hot2cold-side-")
-            self._process = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
+            self._process = subprocess.Popen([sys.executable, "-c", _CHILD.format(root=_ROOT)], stdin=subprocess.PIPE,
                                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         except OSError as exc:
             self._stop(f"it could not start ({exc})")
