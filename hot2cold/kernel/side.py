@@ -54,10 +54,11 @@ class Volumes:
 _READY = "ready"
 #: The folder that holds this ``hot2cold`` package, and the second process's program: it imports the package
 #: from there, the one this process runs (``python -m`` would put the working directory first, and a checkout of
-#: another version there would answer instead).
+#: another version there would answer instead), and takes the folder off the path again before anything else
+#: is imported (an installed package's folder is site-packages, which must not come before the standard library).
 _ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-_CHILD = ("import sys; sys.path.insert(0, {root!r}); from hot2cold.kernel.side import serve; "
-          "serve(sys.stdin, sys.stdout)")
+_CHILD = ("import sys; sys.path.insert(0, {root!r}); import hot2cold; sys.path.pop(0); "
+          "from hot2cold.kernel.side import serve; serve(sys.stdin, sys.stdout)")
 
 
 class KernelSide:
@@ -119,7 +120,7 @@ class KernelSide:
                     self._asked += 1
                     return Volumes(shape, self, self._asked - 1)
                 self._stop("the shape could not be written for it")
-            except (OSError, ValueError) as exc:
+            except Exception as exc:      # noqa: BLE001 - a pipe, a file or the kernel's writer: integrated here
                 self._stop(f"it could not be asked ({exc})")
         return Volumes(shape, volumes=solid_volumes(shape))
 
