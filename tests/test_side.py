@@ -111,3 +111,12 @@ def test_the_second_process_runs_this_package_not_one_in_the_working_directory(t
     with KernelSide() as side:
         assert side.ready(wait=60.0)
         assert side.volumes(two_boxes).result() == solid_volumes(two_boxes)
+
+
+def test_an_answer_of_another_count_of_solids_is_not_taken(two_boxes, monkeypatch):
+    """An answer that does not hold one volume a solid (the second process read some other file) is not taken."""
+    with KernelSide() as side:
+        assert side.ready(wait=60.0)
+        asked = side.volumes(two_boxes)
+        monkeypatch.setattr(side, "answer", lambda request: [1.0])
+        assert asked.result() == solid_volumes(two_boxes)

@@ -26,8 +26,10 @@ import tempfile
 import threading
 
 from OCP.BinTools import BinTools
+from OCP.TopAbs import TopAbs_SOLID
 from OCP.TopoDS import TopoDS_Shape
 
+from .explore import shape_map
 from .validity import solid_volumes
 
 log = logging.getLogger(__name__)
@@ -45,8 +47,9 @@ class Volumes:
         order: the second process's answer, or integrated here where it gives none."""
         if self._volumes is None:
             answer = self._side.answer(self._request) if self._side is not None else None
-            self._volumes = answer if answer is not None else solid_volumes(self._shape)
-            self._shape = self._side = None
+            if answer is None or len(answer) != len(shape_map(self._shape, TopAbs_SOLID)):
+                answer = solid_volumes(self._shape)           # none, or not one a solid: integrated here
+            self._volumes, self._shape, self._side = answer, None, None
         return self._volumes
 
 
