@@ -237,7 +237,3 @@ def serve(requests, answers) -> None:
                 pass
         answers.write(answer + "\n")
         answers.flush()
-
-
-if __name__ == "__main__":
-    serve(sys.stdin, sys.stdout)
