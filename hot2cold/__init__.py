@@ -7,6 +7,8 @@ The method is GT2014-26683 (Gaun, Bestle, Huppertz).  Start with :func:`morph`::
     result.cold          # cadquery.Shape
     result.report        # accuracy and checks
 
+Several fields (load cases) of one part: ``part = load("hot.step")``, then ``morph(part, field)`` for each.
+
 The package is laid out as the method is:
 
 * :mod:`hot2cold.core`: the numeric core, numpy and scipy only (B-spline records, least squares, foot
@@ -30,6 +32,8 @@ __version__ = "0.1.0"
 #: Public name -> the module that defines it.
 _LAZY = {
     "morph": "hot2cold.pipeline.morph",
+    "load": "hot2cold.pipeline.load",
+    "LoadedPart": "hot2cold.pipeline.load",
     "MorphResult": "hot2cold.pipeline.morph",
     "Settings": "hot2cold.settings",
     "DisplacementField": "hot2cold.io.field",

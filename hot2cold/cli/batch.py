@@ -330,6 +330,41 @@ class _Warnings(logging.Handler):
             self.lines.append(in_words(f"{record.name}: {record.getMessage()}", jobs=True))
 
 
+class _KeptPart:
+    """The hot part a worker process loaded last (:func:`~hot2cold.pipeline.load.load`), kept for its next job on
+    the same STEP file: a batch of load cases of one part reads and converts it once per worker, not once per
+    job (the morph of a loaded part is that of the file).  Found by the file's path and content (size and
+    SHA-256, the job's fingerprint: a file changed between jobs is loaded again) and the settings the load reads;
+    one part at a time, so a batch of many parts holds no more than one."""
+
+    def __init__(self):
+        self._key: tuple | None = None
+        self._part = None
+        self._lock = threading.Lock()          # a Dask worker may run jobs in threads
+
+    def get(self, job: Job, digest: dict | None):
+        """What to morph for ``job``: its loaded hot part (kept, or loaded now and kept), or the STEP path where
+        its ``digest`` is unknown (a missing file: the morph says so)."""
+        if digest is None:
+            return job.hot
+        from ..pipeline.load import load
+
+        settings = job.options.to_settings()
+        key = (str(job.hot), digest.get("size"), digest.get("sha256"), settings.edge_samples_per_span)
+        with self._lock:
+            if key != self._key:
+                self._key, self._part = None, None         # the last part is let go before the next one is read
+                self._part = load(job.hot, settings)
+                self._key = key
+            else:
+                log.info("job %s: %s loaded before, taken as it is", job.name, job.hot)
+            return self._part
+
+
+#: This process's :class:`_KeptPart` (a worker's, or the command's own where the jobs run in it).
+_KEPT = _KeptPart()
+
+
 def run_job(job: Job) -> dict:
     """Run one job as ``hot2cold morph`` would (morph, report, check, cold STEP), then write its record.
 
@@ -350,7 +385,7 @@ def run_job(job: Job) -> dict:
             inputs = fingerprint(job)   # before the inputs are read: a change during the run shows next time
         except OSError:
             inputs = None               # a missing input: the morph says which
-        result = run_morph(job.hot, job.field, job.options)
+        result = run_morph(_KEPT.get(job, None if inputs is None else inputs.get("hot")), job.field, job.options)
         for _ in write_cold(result, job.output, job.report):
             pass
         for _ in write_views(result, job.views()):

@@ -17,7 +17,8 @@ from .options import MorphOptions
 
 
 def run_morph(hot, field, options: MorphOptions, progress=None, threads: int = 1):
-    """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path) with ``field`` (field file path) under
+    """:func:`~hot2cold.pipeline.morph.morph` of ``hot`` (STEP path, or the part loaded from it,
+    :class:`~hot2cold.pipeline.load.LoadedPart`) with ``field`` (field file path) under
     ``options``, in up to ``threads`` threads (``Settings.threads``: ``hot2cold morph`` gives its cores, a
     batch job one), with the volumes in a second process where it has more than one
     (``Settings.kernel_process``); returns the :class:`~hot2cold.pipeline.morph.MorphResult`, unchecked:

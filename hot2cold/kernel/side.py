@@ -42,6 +42,11 @@ class Volumes:
                  volumes: list[float] | None = None):
         self._shape, self._side, self._request, self._volumes = shape, side, request, volumes
 
+    @property
+    def known(self) -> bool:
+        """The volumes are in (:meth:`result` returns at once)."""
+        return self._volumes is not None
+
     def result(self) -> list[float]:
         """The volume (mm^3) of each solid of the shape, in :func:`~hot2cold.kernel.explore.shape_map`'s
         order: the second process's answer, or integrated here where it gives none."""

@@ -16,7 +16,6 @@ The hot part stays as it was loaded: the rebuild writes the cold geometry into a
 from __future__ import annotations
 
 import logging
-import os
 import time
 from contextlib import nullcontext
 from dataclasses import asdict, dataclass, replace
@@ -31,13 +30,12 @@ from ..core.model import Classification, Part, Role
 from ..io.field import DisplacementField, as_field
 from ..kernel.project import Projector
 from ..kernel.rebuild import ColdKernel, rebuild
-from ..kernel.shapes import shape_type
 from ..kernel.side import KernelSide, Volumes
 from ..kernel.tolerances import fit_tolerances
 from ..kernel.validity import check_solids
 from ..settings import Settings
 from .artificial import GAP_SHARE, ElementField, carry_to_feet
-from .checks import FieldScale, Rebuilt, check_cold, check_coverage, check_hot, check_positions
+from .checks import FieldScale, Rebuilt, check_cold, check_coverage, check_positions
 from .classify import Starts, classify_nodes
 from .context import MorphContext
 from .continuity import G1Refinement, correct_g2, smooth_g1
@@ -46,7 +44,7 @@ from .face_fit import FaceMorph
 from .g1 import CornerReport
 from .grids import FaceGrid, FaceGridder, FaceNodes, edge_grids, with_slack
 from .invert import invert_field
-from .load import element_points, load_part
+from .load import LoadedPart, element_points, load
 from .refine import TARGET_SHARE, Refitter, Targets, noise_allowance, refine
 from .report import Checks, ColdGeometry, Fits, RunFacts, build_report, node_errors
 from .result import MorphResult, check_result
@@ -114,6 +112,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
     ----------
     hot : a STEP path, a CadQuery Shape/Workplane/Assembly, a build123d Solid/Part/Compound/BuildPart or a
         ``TopoDS_Shape``; its solids are morphed (``result.cold`` comes back in build123d's class for its objects).
+        Or a :class:`~hot2cold.pipeline.load.LoadedPart` (:func:`~hot2cold.pipeline.load.load`): a part loaded once
+        for several fields, morphed without reading and converting it again.
     field : a field file path, a :class:`~hot2cold.io.field.DisplacementField`, or a pair
         ``(points (N, 3), displacements (N, 3))``; hot positions and hot-to-cold displacements.
     settings : tolerances (default :class:`Settings()`).  With ``settings.blas_threads`` set, the BLAS
@@ -138,7 +138,8 @@ def morph(hot, field, settings: Settings | None = None, *, units: str | None = N
     """
     settings = settings or Settings()
     limit = nullcontext() if settings.blas_threads is None else threadpool_limits(settings.blas_threads, "blas")
-    with limit, KernelSide(start=False) as side:       # started once the part is loaded, if it is worth it
+    alone = hot.morphing(settings) if isinstance(hot, LoadedPart) else nullcontext()
+    with alone, limit, KernelSide(start=False) as side:       # started once the part is loaded, if it is worth it
         result = _morph(hot, field, settings, dict(units=units, field_name=field_name, step=field_step,
                                                    columns=columns, points_from=field_points), invert, progress,
                         side)
@@ -433,45 +434,45 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool,  # noqa:
 
     # load (METHOD step 1): the hot part in B-spline form, a closed solid
     stages.begin("load")
-    part = load_part(hot, settings)
-    hot_checks = check_solids(part.kernel.hot, volumes=False)
-    check_hot(part, hot_checks)
+    loaded = hot if isinstance(hot, LoadedPart) else load(hot, settings)
+    part, hot_checks = loaded.part, loaded.checks
     if settings.kernel_process and len(part.faces) >= KERNEL_PROCESS_FACES:
         side.start()
-    hot_volumes = side.volumes(part.kernel.hot)      # needed when the cold part is checked
+    hot_volumes = loaded.volumes(side)      # needed when the cold part is checked
     stages.lap("load")
     memo = BasisMemo()         # the basis rows asked of the faces, for when they are asked again (bounded)
     for face in part.faces:
         face.surface.remember(memo)
+    try:
+        # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
+        stages.begin("classify", len(field))
+        classified = _classify(part, field, settings, invert)
+        cls, field = classified.classification, classified.field
+        stages.lap("classify")
 
-    # classify (step 2, eq. 4, 27, 33-37): each node's foot point on a face, edge or vertex, or ignored
-    stages.begin("classify", len(field))
-    classified = _classify(part, field, settings, invert)
-    cls, field = classified.classification, classified.field
-    stages.lap("classify")
+        # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
+        context = replace(MorphContext.of(part, cls, field, settings, classified.projector),
+                          strain=classified.scale.strain, noise=smoothing_noise(classified.noise, settings))
+        stages.begin("edges", len(part.edges))
+        edge_morphs, corners = context.fit_edges()
+        stages.lap("edges")
 
-    # edges (step 3, eq. 1-22): ends at the morphed vertices, one tangent plane at the corners of tangent edges
-    context = replace(MorphContext.of(part, cls, field, settings, classified.projector),
-                      strain=classified.scale.strain, noise=smoothing_noise(classified.noise, settings))
-    stages.begin("edges", len(part.edges))
-    edge_morphs, corners = context.fit_edges()
-    stages.lap("edges")
+        # faces (steps 4-5, eq. 23-39): boundary rows from the edges, interior by truncated SVD
+        stages.begin("faces", len(part.faces))
+        face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.count("faces", done, total))
+        stages.lap("faces")
 
-    # faces (steps 4-5, eq. 23-39): boundary rows from the edges, interior by truncated SVD
-    stages.begin("faces", len(part.faces))
-    face_morphs = context.fit_faces(edge_morphs, lambda done, total: stages.count("faces", done, total))
-    stages.lap("faces")
+        # refinement to the tolerance (beyond the paper): from here on the context's part is the refined hot part
+        regrid = _gridder(context, classified)
+        refined = _refine(context, classified, face_morphs, edge_morphs, regrid, stages)
+        context = refined.context
 
-    # refinement to the tolerance (beyond the paper): from here on the context's part is the refined hot part
-    regrid = _gridder(context, classified)
-    refined = _refine(context, classified, face_morphs, edge_morphs, regrid, stages)
-    context = refined.context
-
-    # G1 and G2 along the tangent edges, then rebuild, sew and check, then the report
-    context, grids, fits = _smooth_edges(context, refined, corners, regrid, stages)
-    cold = _rebuild_and_check(context, fits, classified, (hot_checks, hot_volumes), grids, stages, side)
-    about = {"hot_name": str(hot) if isinstance(hot, (str, os.PathLike)) else type(hot).__name__,
-             "inversion": None if inversion is None else asdict(inversion)}
-    result = replace(_result(context, classified, fits, cold, stages, about), shape_type=shape_type(hot))
-    memo.close()               # the result's surfaces hold it: nothing kept past the morph
+        # G1 and G2 along the tangent edges, then rebuild, sew and check, then the report
+        context, grids, fits = _smooth_edges(context, refined, corners, regrid, stages)
+        cold = _rebuild_and_check(context, fits, classified, (hot_checks, hot_volumes), grids, stages, side)
+        about = {"hot_name": loaded.name,
+                 "inversion": None if inversion is None else asdict(inversion)}
+        result = replace(_result(context, classified, fits, cold, stages, about), shape_type=loaded.shape_type)
+    finally:
+        memo.close()           # the result's surfaces hold it (and a loaded part's): nothing kept past the morph
     return result
