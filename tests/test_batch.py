@@ -337,6 +337,17 @@ def test_a_worker_that_dies_fails_its_job_only(project):
     assert all(results[n]["status"] == "ok" for n in "xyz")
 
 
+def test_jobs_start_part_by_part_and_the_summary_keeps_the_files_order(project):
+    shutil.copy(project / "hot.step", project / "other.step")
+    rows = [f"{n},{hot},op0.csv,cold/{n}.step," for n, hot in
+            (("p", "other.step"), ("q", "hot.step"), ("r", "other.step"), ("s", "hot.step"))]
+    jobs = batch.read_jobs(_jobs_csv(project, rows))
+    results = list(batch.run_jobs(jobs, workers=1, runner=_crash_or_quick))
+    assert [r["name"] for r in results] == ["q", "s", "p", "r"]   # hot.step's, then other.step's, in file order
+    data = batch.summary(project / "jobs.csv", jobs, results)
+    assert [r["name"] for r in data["jobs"]] == ["p", "q", "r", "s"]
+
+
 def test_missed_tolerance_is_written_recorded_and_exit_code_5(project):
     (job,) = batch.read_jobs(_jobs_csv(project, ["t,hot.step,op0.csv,cold/t.step,"]))
     job = replace(job, options=replace(job.options, tolerance=1e-9, max_refinements=0))

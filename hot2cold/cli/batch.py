@@ -428,7 +428,8 @@ def skipped(job: Job, record: dict, seconds: float = 0.0) -> dict:
 def run_jobs(jobs: list[Job], *, workers: int | None = None, scheduler: str | None = None, force: bool = False,
              runner: Callable[[Job], dict] = run_job) -> Iterator[dict]:
     """Run ``jobs``, yielding each result as it comes: first the skipped ones (done before with the same
-    inputs, unless ``force``), then the others as they finish.
+    inputs, unless ``force``), then the others as they finish, started part by part (the jobs of one hot STEP
+    one after the other, in the file's order among them: a worker loads a part once for its jobs on it).
 
     workers : local worker processes ("spawn", one thread each; default one per core).
     scheduler : the address of a Dask distributed scheduler to run the jobs on instead (paths must be the
@@ -453,6 +454,9 @@ def _run_jobs(jobs, workers, scheduler, force, runner, dask) -> Iterator[dict]:
             yield skipped(job, record, time.perf_counter() - start)
     if not todo:
         return
+    # the jobs of one part one after the other (the file's order kept among them; the summary keeps the file's
+    # order): a worker keeps the last part it loaded for its next job on it (_KeptPart)
+    todo.sort(key=lambda job: str(job.hot))
     if dask:
         yield from _on_dask(todo, scheduler, runner, *dask)
     else:
