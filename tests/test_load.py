@@ -56,6 +56,12 @@ def test_a_loaded_part_morphs_as_its_file_and_is_read_once(block_step, block_nod
     assert first.report.valid and other.report.valid and again.report.valid
 
 
+def test_a_loaded_part_says_what_it_holds_in_a_line(block_step):
+    part = load(block_step)
+    assert repr(part) == (f"LoadedPart({str(block_step)!r}: 1 solid, {len(part.part.faces)} faces, "
+                          f"{len(part.part.edges)} edges)")
+
+
 def test_a_morph_with_other_load_settings_is_refused(block_step, block_nodes):
     part = load(block_step, Settings(edge_samples_per_span=8))
     with pytest.raises(InputError, match="edge_samples_per_span 8, the morph asks for"):

@@ -63,6 +63,11 @@ class LoadedPart:
     #: Held by each morph while it runs (:meth:`morphing`).
     _lock: threading.Lock = dataclass_field(default_factory=threading.Lock, repr=False)
 
+    def __repr__(self) -> str:
+        solids = len(self.part.solids)
+        return (f"LoadedPart({self.name!r}: {solids} solid{'s' * (solids != 1)}, {len(self.part.faces)} faces, "
+                f"{len(self.part.edges)} edges)")
+
     def volumes(self, side: KernelSide) -> Volumes:
         """The hot solids' volumes (mm^3): asked of ``side`` (integrated by its second process while the morph
         goes on, or in this one) until a morph has had them, then that answer for every morph."""
