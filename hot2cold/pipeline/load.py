@@ -17,8 +17,7 @@ from dataclasses import dataclass, field as dataclass_field, replace
 import numpy as np
 
 from ..core.elements import TRIANGLE_SAMPLES, sample_triangles
-from ..errors import KernelError
-from ..errors import InputError
+from ..errors import InputError, KernelError
 from ..kernel.shapes import ShapeType, as_topods, shape_type
 from ..kernel.side import KernelSide, Volumes
 from ..kernel.step import read_step
