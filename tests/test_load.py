@@ -6,12 +6,17 @@ import threading
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 import hot2cold.pipeline.load as loading
+import hot2cold.pipeline.morph as morphing
 from hot2cold import InputError, Settings, load, morph
 from hot2cold.io.field import DisplacementField
 
 pytestmark = pytest.mark.heavy
+
+#: The morphs compared to the bit run with BLAS at one thread (its sums in one order, whatever the machine).
+ONE = Settings(blas_threads=1)
 
 
 def _field(nodes: np.ndarray, scale: float) -> DisplacementField:
@@ -40,12 +45,12 @@ def loads(monkeypatch) -> list:
 
 
 def test_a_loaded_part_morphs_as_its_file_and_is_read_once(block_step, block_nodes, loads):
-    part = load(block_step)
-    first = morph(part, _field(block_nodes, 1.0))
-    other = morph(part, _field(block_nodes, -2.0))     # another load case between, then the first again
-    again = morph(part, _field(block_nodes, 1.0))
-    assert loads == [block_step]                       # the three morphs read nothing
-    fresh = morph(block_step, _field(block_nodes, 1.0))
+    part = load(block_step, ONE)
+    first = morph(part, _field(block_nodes, 1.0), ONE)
+    other = morph(part, _field(block_nodes, -2.0), ONE)     # another load case between, then the first again
+    again = morph(part, _field(block_nodes, 1.0), ONE)
+    assert loads == [block_step]                            # the three morphs read nothing
+    fresh = morph(block_step, _field(block_nodes, 1.0), ONE)
     assert loads == [block_step, block_step]
     assert _figures(first) == _figures(again) == _figures(fresh)
     assert first.report.to_dict()["hot"] == fresh.report.to_dict()["hot"]
@@ -68,19 +73,30 @@ def test_a_morph_with_other_load_settings_is_refused(block_step, block_nodes):
         morph(part, _field(block_nodes, 1.0))
 
 
-def test_morphs_of_one_loaded_part_from_two_threads_take_turns(block_step, block_nodes):
-    part = load(block_step)
-    alone = morph(part, _field(block_nodes, 1.0))
+def test_morphs_of_one_loaded_part_from_two_threads_take_turns(block_step, block_nodes, monkeypatch):
+    part = load(block_step, ONE)
+    alone = morph(part, _field(block_nodes, 1.0), ONE)
+    events, inner = [], morphing._morph
+
+    def watched(*args, **kwargs):
+        events.append("start")
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            events.append("end")
+
+    monkeypatch.setattr(morphing, "_morph", watched)
     results: dict[int, object] = {}
 
     def run(k: int) -> None:
-        results[k] = morph(part, _field(block_nodes, 1.0))
+        results[k] = morph(part, _field(block_nodes, 1.0), ONE)
 
     threads = [threading.Thread(target=run, args=(k,)) for k in range(2)]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
+    assert events == ["start", "end", "start", "end"]        # one after the other, never side by side
     assert _figures(results[0]) == _figures(results[1]) == _figures(alone)
 
 
@@ -97,11 +113,12 @@ def test_a_batch_worker_loads_a_part_once_for_its_load_cases(tmp_path, block_ste
     (tmp_path / "jobs.csv").write_text("name,hot,field,output\n" + "".join(
         f"{job},hot.step,{field}.csv,{job}_cold.step\n" for job, field in (("a", "a"), ("b", "b"), ("c", "a"))))
     a, b, c = batch.read_jobs(tmp_path / "jobs.csv")
-    done = [batch.run_job(a), batch.run_job(b)]
-    assert [r["status"] for r in done] == ["ok", "ok"]
-    assert loads == [hot]                                          # both load cases from one load
-    hot.write_bytes(block_step.read_bytes() + b"\n")              # the same path, another file: loaded again
-    again = batch.run_job(c)
+    with threadpool_limits(1, "blas"):                             # as a worker runs them
+        done = [batch.run_job(a), batch.run_job(b)]
+        assert [r["status"] for r in done] == ["ok", "ok"]
+        assert loads == [hot]                                      # both load cases from one load
+        hot.write_bytes(block_step.read_bytes() + b"\n")          # the same path, another file: loaded again
+        again = batch.run_job(c)
     assert again["status"] == "ok" and loads == [hot, hot]
     assert again["delta_max"] == done[0]["delta_max"]             # job c is job a again
     assert again["verdict_text"] == done[0]["verdict_text"]
