@@ -71,6 +71,9 @@ def test_a_morph_with_other_load_settings_is_refused(block_step, block_nodes):
     part = load(block_step, Settings(edge_samples_per_span=8))
     with pytest.raises(InputError, match="edge_samples_per_span 8, the morph asks for"):
         morph(part, _field(block_nodes, 1.0))
+    assert load(part, Settings(edge_samples_per_span=8)) is part       # loaded already: as it is
+    with pytest.raises(InputError, match="edge_samples_per_span 8"):
+        load(part)
 
 
 def test_morphs_of_one_loaded_part_from_two_threads_take_turns(block_step, block_nodes, monkeypatch):

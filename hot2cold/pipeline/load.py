@@ -74,13 +74,17 @@ class LoadedPart:
             self._volumes[:] = [side.volumes(self.part.kernel.hot)]
         return self._volumes[0]
 
-    def morphing(self, settings: Settings) -> threading.Lock:
-        """The lock a morph of this part holds while it runs, once ``settings`` are found to match the load's;
-        :class:`InputError` where they do not."""
+    def check(self, settings: Settings) -> None:
+        """Raise :class:`InputError` where ``settings`` ask for another load than this one."""
         if settings.edge_samples_per_span != self.edge_samples_per_span:
             raise InputError(f"the part {self.name} was loaded with edge_samples_per_span "
                              f"{self.edge_samples_per_span}, the morph asks for {settings.edge_samples_per_span}: "
                              "load it again with the morph's settings")
+
+    def morphing(self, settings: Settings) -> threading.Lock:
+        """The lock a morph of this part holds while it runs, once ``settings`` are found to match the load's
+        (:meth:`check`)."""
+        self.check(settings)
         return self._lock
 
 
@@ -92,13 +96,17 @@ def load(hot, settings: Settings | None = None) -> LoadedPart:
         part = hot2cold.load("blade.step")
         cold = [hot2cold.morph(part, field) for field in ("case1.csv", "case2.csv")]
 
-    ``settings``: those of the morphs (only ``edge_samples_per_span`` matters here; default ``Settings()``).
+    ``settings``: those of the morphs (only ``edge_samples_per_span`` matters here; default ``Settings()``).  A
+    :class:`LoadedPart` comes back as it is where it was loaded with them.
 
     Raises
     ------
     StepReadError, InputError, KernelError : as :func:`~hot2cold.pipeline.morph.morph` for the same part.
     """
     settings = settings or Settings()
+    if isinstance(hot, LoadedPart):
+        hot.check(settings)
+        return hot
     part = load_part(hot, settings)
     checks = check_solids(part.kernel.hot, volumes=False)
     check_hot(part, checks)
