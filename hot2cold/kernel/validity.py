@@ -102,12 +102,10 @@ def check_solids(shape, volumes: bool = True) -> list[SolidCheck]:
     """One :class:`SolidCheck` per solid of ``shape``; without ``volumes``, their volumes are not integrated
     (None): on a part of many spline faces the integration to :data:`GPROP_EPS` takes seconds, and a check of
     validity alone does not need it."""
-    out = []
-    for solid in shape_map(shape, TopAbs_SOLID):
-        out.append(SolidCheck(valid=bool(BRepCheck_Analyzer(solid).IsValid()), free_edges=free_edges(solid),
-                              faces=len(shape_map(solid, TopAbs_FACE)),
-                              volume=volume(solid) if volumes else None))
-    return out
+    checks = [SolidCheck(valid=bool(BRepCheck_Analyzer(solid).IsValid()), free_edges=free_edges(solid),
+                         faces=len(shape_map(solid, TopAbs_FACE)), volume=None)
+              for solid in shape_map(shape, TopAbs_SOLID)]
+    return with_volumes(checks, solid_volumes(shape)) if volumes else checks
 
 
 @dataclass(frozen=True)

@@ -434,7 +434,7 @@ def _morph(hot, field, settings: Settings, reading: dict, invert: bool,  # noqa:
 
     # load (METHOD step 1): the hot part in B-spline form, a closed solid
     stages.begin("load")
-    loaded = hot if isinstance(hot, LoadedPart) else load(hot, settings)
+    loaded = load(hot, settings)              # a LoadedPart as it is
     part, hot_checks = loaded.part, loaded.checks
     if settings.kernel_process and len(part.faces) >= KERNEL_PROCESS_FACES:
         side.start()
